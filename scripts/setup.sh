@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Idempotent set-up: system package for open3d, a virtualenv, pinned CPU torch, the project.
+set -euo pipefail
+VENV="${1:-.venv}"
+PYTHON="${PYTHON:-python3}"
+
+if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+    if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+        echo "[setup] installing libusb-1.0-0 (needed by open3d)"
+        apt-get update -qq >/dev/null 2>&1 || true
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null
+    else
+        echo "[setup] warning: libusb-1.0-0 missing and cannot apt-get install it; open3d features will be unavailable" >&2
+    fi
+fi
+
+if [ ! -x "$VENV/bin/python" ]; then
+    echo "[setup] creating $VENV"
+    "$PYTHON" -m venv "$VENV"
+fi
+PIP="$VENV/bin/python -m pip"
+# Pinned CPU torch first: an unpinned torch would pull several GB of CUDA wheels.
+if ! "$VENV/bin/python" -c "import torch" >/dev/null 2>&1; then
+    echo "[setup] installing torch==2.13.0 (CPU)"
+    $PIP install -q torch==2.13.0
+fi
+echo "[setup] installing sgbelief and its dependencies"
+$PIP install -q -e ".[all,dev]"
+"$VENV/bin/python" -c "import sgbelief, sys; print('[setup] sgbelief', sgbelief.__version__, 'ready on Python', sys.version.split()[0])"

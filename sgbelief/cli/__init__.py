@@ -1,0 +1,67 @@
+"""Command-line interface: ``sgbelief <command> ...``.
+
+Each command lives in its own module ``sgbelief.cli.<module>`` that defines
+``add_arguments(parser)`` and ``run(args) -> int``; modules are imported only
+when their command runs, so ``sgbelief --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+# command -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "replay": ("sgbelief.cli.replay", "replay an evidence log through several fusion operators"),
+    "bench": ("sgbelief.cli.bench", "run the simulated suites and reproduce the paper's tables"),
+    "query": ("sgbelief.cli.query", "ask a compound query of a saved scene graph"),
+    "retrieval": ("sgbelief.cli.retrieval", "compound-query retrieval F1 per operator"),
+    "import-cg": ("sgbelief.cli.import_cg", "import a saved ConceptGraphs map and replay its detections"),
+    "inspect": ("sgbelief.cli.inspect", "show a saved graph's beliefs and provenance"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from sgbelief import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="sgbelief",
+        description="Calibrated, provenance-tracked beliefs for 3D scene graphs.",
+    )
+    parser.add_argument("--version", action="version", version=f"sgbelief {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (_module, help_text) in COMMANDS.items():
+        sub.add_parser(name, help=help_text, add_help=False)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in {"-h", "--help", "--version"} or argv[0] not in COMMANDS:
+        parser = build_parser()
+        if not argv:
+            parser.print_help()
+            return 2
+        parser.parse_args(argv)  # prints help/version or an "invalid choice" error
+        return 2
+    name, rest = argv[0], argv[1:]
+    module = importlib.import_module(COMMANDS[name][0])
+    parser = argparse.ArgumentParser(prog=f"sgbelief {name}", description=COMMANDS[name][1])
+    module.add_arguments(parser)
+    args = parser.parse_args(rest)
+    from sgbelief.errors import SgbeliefError
+
+    try:
+        return int(module.run(args) or 0)
+    except SgbeliefError as exc:
+        print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
+        return 1
+    except FileNotFoundError as exc:
+        print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,3 @@
+from sgbelief.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,70 @@
+"""Exception types. Every error raised on bad input names the field (and line/file when known)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+
+class SgbeliefError(Exception):
+    """Base class of all sgbelief errors."""
+
+
+class InvalidEventError(SgbeliefError, ValueError):
+    """An evidence event violates Def. 2 (bad confidence, targeting mass, predicate, ...)."""
+
+    def __init__(self, field: str, message: str) -> None:
+        self.field = field
+        super().__init__(f"invalid evidence event: field '{field}': {message}")
+
+
+class UnknownPredicateError(SgbeliefError, KeyError):
+    """A predicate that the vocabulary does not define."""
+
+    def __init__(self, predicate: str, known: Iterable[str]) -> None:
+        self.predicate = predicate
+        self.known = sorted(known)
+        shown = ", ".join(self.known[:40]) + (" ..." if len(self.known) > 40 else "")
+        super().__init__(f"unknown predicate {predicate!r}; known predicates: {shown}")
+
+    def __str__(self) -> str:  # KeyError would repr() the message
+        return str(self.args[0])
+
+
+class UnknownNodeError(SgbeliefError, KeyError):
+    """A node id that is not in the scene graph."""
+
+    def __init__(self, node: object) -> None:
+        self.node = node
+        super().__init__(f"unknown node {node!r}")
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+class ConfigError(SgbeliefError, ValueError):
+    """An invalid configuration value or file; the message names the key."""
+
+
+class FormatError(SgbeliefError, ValueError):
+    """A malformed file (JSON, JSONL, YAML, saved graph); the message names file, line and field."""
+
+    def __init__(self, message: str, *, path: object = None, line: int | None = None) -> None:
+        self.path = path
+        self.line = line
+        where = ""
+        if path is not None:
+            where = f"{path}"
+            if line is not None:
+                where += f":{line}"
+            where += ": "
+        elif line is not None:
+            where = f"line {line}: "
+        super().__init__(where + message)
+
+
+class RetractionError(SgbeliefError, LookupError):
+    """An event cannot be retracted (unknown id, or folded away by provenance compaction)."""
+
+
+class QueueError(SgbeliefError, LookupError):
+    """A queue operation on an event that is not pending (e.g. confirming a committed event)."""
