@@ -1,0 +1,326 @@
+"""Evaluating compound queries over a scene graph: probabilities, ranking, explanations.
+
+Probability of a compound (independence assumption across components)::
+
+    P(v, q) = prod_{belief literals b} f_b(v)  *  prod_{geometric literals g} 1[g(v) holds]
+
+with ``f_b = p`` for a plain and ``1 - p`` for a negated belief literal, ``p`` the posterior mean
+of the node's Beta belief (``graph.probability``). Geometric literals come from the relation
+registry and are authoritative indicators (0 or 1; a negated one is ``1 - indicator``); a
+geometric predicate that cannot be decided (missing attribute, value None) gives 0 in *either*
+polarity. A node is retrieved when ``P >= tau`` (default 0.5).
+
+Candidates: with ``require_evidence=True`` (default) only nodes that have evidence on every
+*positive* belief literal are scored -- a node nobody has made a claim about stays at the prior
+mean 0.5 and would otherwise be "retrieved" at tau = 0.5. A negated belief literal without
+evidence contributes ``1 - 0.5 = 0.5``.
+
+Per-component reuse: a :class:`QueryEngine` caches every belief probability and geometric value
+it reads, so evaluating a batch of compounds that share components reads each (node, predicate)
+once. Nothing is written to the graph.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from sgbelief.query.language import Compound, Literal, QueryPredicateError, parse
+from sgbelief.query.relations import DEFAULT_REGISTRY, GeometryContext, RelationConfig, RelationRegistry
+
+__all__ = ["Component", "Match", "QueryResult", "QueryEngine", "run_query"]
+
+BELIEF = "belief"
+GEOMETRIC = "geometric"
+
+
+@dataclass(frozen=True)
+class Component:
+    """One literal's contribution for one node.
+
+    ``value``: the belief probability (belief) or the predicate's truth value (geometric, None
+    when undecidable); ``factor``: what enters the product (p, 1-p, 1 or 0)."""
+
+    name: str
+    kind: str
+    negated: bool
+    value: float | bool | None
+    factor: float
+    evidence: bool = True
+
+    @property
+    def literal(self) -> str:
+        return ("!" if self.negated else "") + self.name
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"predicate": self.name, "kind": self.kind, "negated": self.negated,
+                "value": self.value, "factor": self.factor, "evidence": self.evidence}
+
+    def describe(self) -> str:
+        if self.kind == BELIEF:
+            ev = "" if self.evidence else " (no evidence: prior)"
+            if self.negated:
+                return f"{self.literal} = 1 - {self.value:.3f} = {self.factor:.3f}  [belief]{ev}"
+            return f"{self.literal} = {self.factor:.3f}  [belief]{ev}"
+        shown = "undecidable (missing attribute)" if self.value is None else str(bool(self.value)).lower()
+        return f"{self.literal} = {self.factor:.0f}  [geometric: {shown}]"
+
+
+@dataclass(frozen=True)
+class Match:
+    """A scored node: its compound probability and the per-component breakdown."""
+
+    node: Any
+    probability: float
+    components: tuple[Component, ...]
+    retrieved: bool
+
+    def explain(self) -> str:
+        """Multi-line explanation: the product and one line per component."""
+        head = f"{self.node}: P = {self.probability:.4f} ({'retrieved' if self.retrieved else 'not retrieved'})"
+        return "\n".join([head] + ["  " + c.describe() for c in self.components])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"node": self.node, "probability": self.probability, "retrieved": self.retrieved,
+                "components": [c.to_dict() for c in self.components]}
+
+
+@dataclass
+class QueryResult:
+    """Retrieved nodes ranked by probability (descending; ties by node id)."""
+
+    compound: Compound
+    tau: float
+    matches: list[Match]
+    n_candidates: int
+    name: str | None = None
+    kinds: dict[str, str] = field(default_factory=dict)
+
+    def __iter__(self) -> Iterator[Match]:
+        return iter(self.matches)
+
+    def __len__(self) -> int:
+        return len(self.matches)
+
+    def __getitem__(self, i: int) -> Match:
+        return self.matches[i]
+
+    @property
+    def nodes(self) -> list[Any]:
+        return [m.node for m in self.matches]
+
+    @property
+    def expression(self) -> str:
+        return str(self.compound)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"query": self.name, "expression": self.expression, "tau": self.tau,
+                "components": [{"predicate": lit.name, "negated": lit.negated, "kind": self.kinds.get(lit.name)}
+                               for lit in self.compound.literals],
+                "n_candidates": self.n_candidates, "n_retrieved": len(self.matches),
+                "results": [m.to_dict() for m in self.matches]}
+
+    def table(self, limit: int | None = None) -> str:
+        """Plain-text table: rank, node, P, then one column per component factor."""
+        lits = list(self.compound.literals)
+        head = ["rank", "node", "P"] + [f"{lit}[{'b' if self.kinds.get(lit.name) == BELIEF else 'g'}]" for lit in lits]
+        rows = []
+        for r, m in enumerate(self.matches[:limit] if limit else self.matches, 1):
+            rows.append([str(r), str(m.node), f"{m.probability:.4f}"] + [
+                f"{c.factor:.3f}" if c.kind == BELIEF else ("?" if c.value is None else f"{c.factor:.0f}")
+                for c in m.components])
+        widths = [max(len(h), *(len(row[i]) for row in rows)) if rows else len(h) for i, h in enumerate(head)]
+        fmt = lambda row: "  ".join(x.ljust(w) if i == 1 else x.rjust(w) for i, (x, w) in enumerate(zip(row, widths)))  # noqa: E731
+        title = f"{self.name + ': ' if self.name else ''}{self.expression}   (tau = {self.tau}, " \
+                f"{len(self.matches)} retrieved of {self.n_candidates} candidates; b = belief, g = geometric)"
+        out = [title, fmt(head)] + [fmt(r) for r in rows]
+        if limit and len(self.matches) > limit:
+            out.append(f"... {len(self.matches) - limit} more")
+        return "\n".join(out)
+
+
+class QueryEngine:
+    """Answers compound queries over one graph with per-batch caches of every component read.
+
+    ``registry``: geometric predicates (default :data:`DEFAULT_REGISTRY`); ``config``: their
+    thresholds; ``tau``: retrieval threshold; ``require_evidence``: see the module docstring.
+    The caches assume the graph does not change while the engine is in use (call :meth:`clear`
+    after updates)."""
+
+    def __init__(self, graph: Any, *, registry: RelationRegistry | None = None,
+                 config: RelationConfig | None = None, tau: float = 0.5,
+                 require_evidence: bool = True) -> None:
+        if not 0.0 <= tau <= 1.0:
+            raise ValueError(f"tau must be in [0, 1], got {tau!r}")
+        self.graph = graph
+        self.registry = registry if registry is not None else DEFAULT_REGISTRY
+        self.config = config or RelationConfig()
+        self.tau = tau
+        self.require_evidence = require_evidence
+        self.clear()
+
+    def clear(self) -> None:
+        """Drop all caches (after the graph changed)."""
+        self.ctx = GeometryContext(self.graph, self.config)
+        self._prob: dict[str, dict[Any, float]] = {}
+        self._evidence: dict[str, set[Any]] = {}
+        self._geo: dict[str, dict[Any, bool | None]] = {}
+        self._known_beliefs: set[str] | None = None
+        self.belief_reads = 0
+        self.geometric_evals = 0
+
+    # -- compilation -------------------------------------------------------------------------
+    def known_belief_predicates(self) -> set[str]:
+        if self._known_beliefs is None:
+            known = set(self.graph.predicates())
+            vocab = getattr(self.graph, "vocabulary", None)
+            if vocab:
+                known |= set(vocab)
+            self._known_beliefs = known
+        return self._known_beliefs
+
+    def compile(self, expr: str | Compound) -> tuple[Compound, dict[str, str]]:
+        """Parse (if needed) and resolve each literal to 'geometric' (registry) or 'belief'."""
+        compound = parse(expr) if isinstance(expr, str) else expr
+        kinds: dict[str, str] = {}
+        for lit in compound.literals:
+            if lit.name in self.registry:
+                kinds[lit.name] = GEOMETRIC
+            elif lit.name in self.known_belief_predicates():
+                kinds[lit.name] = BELIEF
+            else:
+                known = sorted(self.known_belief_predicates()) + self.registry.names()
+                raise QueryPredicateError(lit.name, known, compound.expression, max(lit.position, 0))
+        return compound, kinds
+
+    # -- cached component reads --------------------------------------------------------------
+    def evidence_nodes(self, predicate: str) -> set[Any]:
+        """Nodes with at least one evidence entry on ``predicate``."""
+        s = self._evidence.get(predicate)
+        if s is None:
+            prov = getattr(self.graph, "provenance", None)
+            if prov is not None and hasattr(prov, "nodes_with"):
+                s = set(prov.nodes_with(predicate))
+            else:
+                s = {n for n in self.graph.nodes() if predicate in self.graph.beliefs(n)}
+            self._evidence[predicate] = s
+        return s
+
+    def belief(self, node: Any, predicate: str) -> float:
+        cache = self._prob.setdefault(predicate, {})
+        p = cache.get(node)
+        if p is None:
+            p = float(self.graph.probability(node, predicate))
+            cache[node] = p
+            self.belief_reads += 1
+        return p
+
+    def geometric(self, node: Any, name: str) -> bool | None:
+        cache = self._geo.setdefault(name, {})
+        if node in cache:
+            return cache[node]
+        v = self.registry.get(name)(self.ctx, node)
+        cache[node] = v
+        self.geometric_evals += 1
+        return v
+
+    # -- scoring -----------------------------------------------------------------------------
+    def candidates(self, compound: Compound, kinds: Mapping[str, str], nodes: Iterable[Any] | None = None) -> list[Any]:
+        """Nodes scored for ``compound`` (see ``require_evidence``), in graph order."""
+        pool = list(self.graph.nodes()) if nodes is None else list(nodes)
+        if self.require_evidence:
+            for lit in compound.literals:
+                if kinds[lit.name] == BELIEF and not lit.negated:
+                    ev = self.evidence_nodes(lit.name)
+                    pool = [n for n in pool if n in ev]
+        return pool
+
+    def score(self, node: Any, compound: Compound, kinds: Mapping[str, str], *, prune: bool = False,
+              tau: float | None = None) -> Match | None:
+        """Score one node; with ``prune`` return None as soon as P < tau is certain."""
+        tau = self.tau if tau is None else tau
+        comps: list[Component] = []
+        prob = 1.0
+        lits: Sequence[Literal] = compound.literals
+        # beliefs first (cheap), then geometry
+        for lit in lits:
+            if kinds[lit.name] != BELIEF:
+                continue
+            p = self.belief(node, lit.name)
+            f = 1.0 - p if lit.negated else p
+            prob *= f
+            comps.append(Component(lit.name, BELIEF, lit.negated, p, f,
+                                   node in self.evidence_nodes(lit.name)))
+            if prune and prob < tau:
+                return None
+        for lit in lits:
+            if kinds[lit.name] != GEOMETRIC:
+                continue
+            v = self.geometric(node, lit.name)
+            f = 0.0 if v is None else float(v != lit.negated)
+            prob *= f
+            comps.append(Component(lit.name, GEOMETRIC, lit.negated, v, f))
+            if prune and prob < tau:
+                return None
+        order = {lit.name: i for i, lit in enumerate(lits)}
+        comps.sort(key=lambda c: order[c.name])
+        return Match(node, prob, tuple(comps), prob >= tau)
+
+    def evaluate(self, expr: str | Compound, *, tau: float | None = None, nodes: Iterable[Any] | None = None,
+                 include_all: bool = False, limit: int | None = None, name: str | None = None) -> QueryResult:
+        """Ranked retrieval for one compound. ``include_all`` also lists non-retrieved candidates
+        (fully scored, no pruning); ``limit`` keeps the top k."""
+        tau = self.tau if tau is None else tau
+        compound, kinds = self.compile(expr)
+        pool = self.candidates(compound, kinds, nodes)
+        matches = []
+        for node in pool:
+            m = self.score(node, compound, kinds, prune=not include_all, tau=tau)
+            if m is not None and (include_all or m.retrieved):
+                matches.append(m)
+        matches.sort(key=lambda m: (-m.probability, str(m.node)))
+        if limit is not None:
+            matches = matches[:limit]
+        return QueryResult(compound, tau, matches, len(pool), name=name, kinds=dict(kinds))
+
+    def evaluate_many(self, exprs: Mapping[str, str | Compound] | Iterable[str | Compound], **kw: Any) -> dict[str, QueryResult]:
+        """Evaluate a batch sharing this engine's caches; keys are the names (or expressions)."""
+        items = exprs.items() if isinstance(exprs, Mapping) else ((str(e), e) for e in exprs)
+        return {k: self.evaluate(e, name=k if isinstance(exprs, Mapping) else None, **kw) for k, e in items}
+
+    def probabilities(self, expr: str | Compound, nodes: Iterable[Any] | None = None) -> dict[Any, float]:
+        """P(node, compound) for every candidate (no pruning)."""
+        compound, kinds = self.compile(expr)
+        out = {}
+        for node in self.candidates(compound, kinds, nodes):
+            m = self.score(node, compound, kinds)
+            assert m is not None
+            out[node] = m.probability
+        return out
+
+    def explain(self, expr: str | Compound, node: Any) -> Match:
+        """Full breakdown for one node (whether or not it is a candidate)."""
+        compound, kinds = self.compile(expr)
+        m = self.score(node, compound, kinds)
+        assert m is not None
+        return m
+
+
+def run_query(graph: Any, expr: str | Compound, tau: float = 0.5, registry: RelationRegistry | None = None, *,
+              config: RelationConfig | None = None, require_evidence: bool = True,
+              include_all: bool = False, limit: int | None = None) -> QueryResult:
+    """Answer one compound query: ``expr`` is an expression, a :class:`Compound`, or the name /
+    title of a named query (``configs/queries/*.yaml``; its ``relations`` thresholds apply unless
+    ``config`` is given). Returns a ranked, self-explaining :class:`QueryResult`."""
+    name = None
+    if isinstance(expr, str):
+        from sgbelief.query.named import find_named_query
+
+        nq = find_named_query(expr)
+        if nq is not None:
+            name, expr = nq.name, nq.compound
+            if config is None:
+                config = nq.config
+    engine = QueryEngine(graph, registry=registry, config=config, tau=tau, require_evidence=require_evidence)
+    return engine.evaluate(expr, include_all=include_all, limit=limit, name=name)
