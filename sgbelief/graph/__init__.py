@@ -1,1 +1,18 @@
-"""graph"""
+"""Beliefs, provenance, the scene graph and its persistence."""
+
+from __future__ import annotations
+
+from sgbelief.graph.belief import BetaBelief, beta_kl
+from sgbelief.graph.provenance import COUNTED, PENDING, EntryStatus, ProvenanceEntry, ProvenanceStore
+from sgbelief.graph.scene_graph import SceneGraph
+
+__all__ = [
+    "BetaBelief",
+    "beta_kl",
+    "COUNTED",
+    "PENDING",
+    "EntryStatus",
+    "ProvenanceEntry",
+    "ProvenanceStore",
+    "SceneGraph",
+]

@@ -1,0 +1,222 @@
+"""Per-class (Mondrian) calibration of foundation-model confidences against the geometric channel (§4.1).
+
+Outcomes (c, y) enter a streaming buffer whenever the geometric channel is decisive for the
+claimed predicate (y = 1: its label is in phi's positive set, y = 0: in the negative set). The
+buffer is sliced per (kappa, phi) and pooled per phi and globally. For each slice:
+
+- an isotonic calibrator p_hat(y = 1 | c) (scikit-learn ``IsotonicRegression``), refitted only when
+  the slice has grown by ``refit_growth`` (amortised O(log n) per outcome); a query is a bisection
+  over the fitted knots plus linear interpolation, O(log n);
+- the calibrated likelihood ratio of Eq. 2, recovered with Bayes' rule from p_hat and the slice's
+  base rate pi::
+
+      Lambda_hat(c) = p(c | y=1) / p(c | y=0) = [p_hat / (1 - p_hat)] * [(1 - pi) / pi]
+
+  with p_hat and pi clipped to [eps, 1 - eps] (eps = 1 / (2 (n + 1))) and Lambda_hat clipped to
+  [1 / lr_max, lr_max], so it is always finite and positive;
+- nonconformity scores (Eq. 1) for split and adaptive conformal sets (conformal.py).
+
+Shrinkage: log Lambda = l_s log L_slice + (1 - l_s) [l_p log L_phi + (1 - l_p) log L_global] with
+l = min(1, n / target_size) per level; kappa_hat(e) = clip(n_slice / target_size, kappa_min, 1).
+Cold start (no outcome at any level): Lambda = c / (1 - c) ("raw", the model taken at its word,
+at the minimal weight kappa_min) or Lambda = 1 ("neutral").
+"""
+
+from __future__ import annotations
+
+import math
+from array import array
+from bisect import bisect_right
+from typing import Any
+
+import numpy as np
+
+from sgbelief.fusion.config import CalibrationConfig
+from sgbelief.fusion.conformal import (
+    ConformalSlice,
+    PredictionSet,
+    no_coverage,
+    nonconformity,
+    prediction_set,
+)
+
+_GLOBAL = ("*", "*")
+
+
+class CalibrationSlice:
+    """The outcomes of one Mondrian slice and its current isotonic fit."""
+
+    __slots__ = ("c", "y", "n", "n_pos", "n_fit", "kx", "ky", "base_rate", "log_prior_odds", "conformal")
+
+    def __init__(self, alpha: float) -> None:
+        self.c = array("d")
+        self.y = array("b")
+        self.n = 0
+        self.n_pos = 0
+        self.n_fit = 0
+        self.kx: list[float] = []
+        self.ky: list[float] = []
+        self.base_rate = 0.5
+        self.log_prior_odds = 0.0
+        self.conformal = ConformalSlice(alpha)
+
+    def add(self, c: float, y: int) -> None:
+        self.c.append(c)
+        self.y.append(y)
+        self.n += 1
+        self.n_pos += y
+        self.conformal.scores.append(nonconformity(c, y))
+
+    def refit(self) -> None:
+        """Fit p_hat(y=1 | c) by isotonic regression on the whole slice (scikit-learn)."""
+        from sklearn.isotonic import IsotonicRegression
+
+        x = np.frombuffer(self.c, dtype=np.float64)[: self.n]
+        yy = np.frombuffer(self.y, dtype=np.int8)[: self.n].astype(np.float64)
+        iso = IsotonicRegression(increasing=True, y_min=0.0, y_max=1.0, out_of_bounds="clip")
+        iso.fit(x, yy)
+        self.kx = iso.X_thresholds_.tolist()
+        self.ky = iso.y_thresholds_.tolist()
+        self.n_fit = self.n
+        eps = 0.5 / (self.n + 1)
+        pi = min(max(self.n_pos / self.n, eps), 1.0 - eps)
+        self.base_rate = self.n_pos / self.n
+        self.log_prior_odds = math.log(pi / (1.0 - pi))
+        self.conformal.refresh()
+
+    def p_hat(self, c: float) -> float:
+        """Isotonic calibrated probability at c: bisection + linear interpolation, O(log n)."""
+        kx = self.kx
+        i = bisect_right(kx, c)
+        if i == 0:
+            return self.ky[0]
+        if i >= len(kx):
+            return self.ky[-1]
+        x0, x1 = kx[i - 1], kx[i]
+        y0, y1 = self.ky[i - 1], self.ky[i]
+        if x1 == x0:
+            return y1
+        return y0 + (y1 - y0) * (c - x0) / (x1 - x0)
+
+    def log_lr(self, c: float) -> float:
+        """log Lambda_hat(c) of Eq. 2 (unclipped in magnitude only by the eps-clipping of p_hat)."""
+        eps = 0.5 / (self.n_fit + 1)
+        p = min(max(self.p_hat(c), eps), 1.0 - eps)
+        return math.log(p / (1.0 - p)) - self.log_prior_odds
+
+
+class MondrianCalibrator:
+    """Streaming calibration buffer C, sliced per (kappa, phi), with per-phi and global pooling."""
+
+    def __init__(self, config: CalibrationConfig | None = None, alpha: float = 0.1) -> None:
+        self.config = config or CalibrationConfig()
+        self.alpha = alpha
+        self.slices: dict[tuple[str, str], CalibrationSlice] = {}
+        self._log_lr_max = math.log(self.config.lr_max)
+        self.frozen = False
+
+    # ------------------------------------------------------------------ data
+    def _slice(self, key: tuple[str, str]) -> CalibrationSlice:
+        s = self.slices.get(key)
+        if s is None:
+            s = self.slices[key] = CalibrationSlice(self.alpha)
+        return s
+
+    def add(self, context: str, predicate: str, c: float, y: int) -> None:
+        """Append one verification outcome to its slice, its predicate pool and the global pool.
+
+        The adaptive conformal level of the slice is updated first with this outcome (was y
+        in the set the slice would have produced for c?), as in Alg. 1's outcome loop.
+        """
+        if self.frozen:
+            return
+        cfg = self.config
+        for key in ((context, predicate), ("*", predicate), _GLOBAL):
+            s = self._slice(key)
+            if key[0] != "*" and s.n_fit > 0:
+                conf = s.conformal
+                q = conf.threshold(conf.alpha_t) if conf.alpha_t > 0 else math.inf
+                err = 0 if nonconformity(c, y) <= q else 1
+                conf.n_seen += 1
+                conf.n_err += err
+                conf.alpha_t += cfg.adaptive_gamma * (self.alpha - err)
+            s.add(c, y)
+            if s.n - s.n_fit >= max(cfg.min_refit, cfg.refit_growth * s.n_fit) or s.n_fit == 0:
+                s.refit()
+
+    def refit_all(self) -> None:
+        for s in self.slices.values():
+            if s.n and s.n_fit != s.n:
+                s.refit()
+
+    def n_outcomes(self, context: str = "*", predicate: str = "*") -> int:
+        s = self.slices.get((context, predicate))
+        return 0 if s is None else s.n
+
+    # --------------------------------------------------------------- queries
+    def likelihood_ratio(self, c: float, context: str, predicate: str) -> tuple[float, float]:
+        """(Lambda_hat, kappa_hat) for a claim with raw confidence c (Eq. 2 with shrinkage)."""
+        cfg = self.config
+        slices = self.slices
+        target = cfg.target_size
+        s = slices.get((context, predicate))
+        p = slices.get(("*", predicate))
+        g = slices.get(_GLOBAL)
+        n_s = s.n_fit if s is not None else 0
+        n_p = p.n_fit if p is not None else 0
+        n_g = g.n_fit if g is not None else 0
+        if n_g == 0:
+            kappa = cfg.kappa_min
+            if cfg.cold_start == "neutral":
+                return 1.0, kappa
+            cc = min(max(c, 1e-6), 1.0 - 1e-6)
+            lam = cc / (1.0 - cc)
+            lo = 1.0 / cfg.lr_max
+            return (lo if lam < lo else cfg.lr_max if lam > cfg.lr_max else lam), kappa
+        log_lr = g.log_lr(c)  # type: ignore[union-attr]
+        if n_p:
+            lp = min(1.0, n_p / target)
+            log_lr = lp * p.log_lr(c) + (1.0 - lp) * log_lr  # type: ignore[union-attr]
+        if n_s:
+            ls = min(1.0, n_s / target)
+            log_lr = ls * s.log_lr(c) + (1.0 - ls) * log_lr  # type: ignore[union-attr]
+        m = self._log_lr_max
+        if log_lr > m:
+            log_lr = m
+        elif log_lr < -m:
+            log_lr = -m
+        kappa = n_s / target
+        if kappa > 1.0:
+            kappa = 1.0
+        elif kappa < cfg.kappa_min:
+            kappa = cfg.kappa_min
+        return math.exp(log_lr), kappa
+
+    def calibrated_probability(self, c: float, context: str, predicate: str) -> float:
+        """p_hat(y=1 | c) of the most specific fitted slice (slice, then predicate, then global)."""
+        for key in ((context, predicate), ("*", predicate), _GLOBAL):
+            s = self.slices.get(key)
+            if s is not None and s.n_fit:
+                return s.p_hat(c)
+        return c
+
+    def in_regime(self, context: str, predicate: str) -> bool:
+        """(phi, kappa) is calibratable: at least one verification outcome in its slice (Property 1)."""
+        s = self.slices.get((context, predicate))
+        return s is not None and s.n_fit > 0
+
+    def prediction_set(self, c: float, context: str, predicate: str, *, adaptive: bool = False) -> PredictionSet:
+        """Event-level (1 - alpha) set over {0, 1} for a claim (c, kappa, phi), or no coverage claim."""
+        s = self.slices.get((context, predicate))
+        if s is None or s.n_fit == 0:
+            return no_coverage(f"no verification outcome yet for context {context!r}, predicate {predicate!r}")
+        conf = s.conformal
+        level = conf.alpha_t if adaptive else self.alpha
+        q = conf.threshold(level) if level > 0 else math.inf
+        return PredictionSet(prediction_set(c, q), 1.0 - self.alpha, conf.n_sorted)
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            f"{k[0]}|{k[1]}": {"n": s.n, "base_rate": s.base_rate, "knots": len(s.kx), "alpha_t": s.conformal.alpha_t}
+            for k, s in sorted(self.slices.items())
+        }

@@ -1,0 +1,187 @@
+"""The compatibility predicate compat(phi_f, phi_g) in {T, ⊥, ∅} from a subsumption table (§4.2)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Mapping
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from sgbelief.errors import ConfigError, FormatError, UnknownPredicateError
+
+
+class Verdict(str, Enum):
+    """Three-valued verdict of the geometric channel on a foundation-model claim."""
+
+    CORROBORATES = "corroborates"  #: T: the geometric label agrees with the claim
+    CONTRADICTS = "contradicts"  #: ⊥: the geometric label explicitly disagrees
+    NO_CLAIM = "no_claim"  #: ∅: out of vocabulary for the predicate, or the channel cannot assert
+
+    @property
+    def symbol(self) -> str:
+        return {"corroborates": "T", "contradicts": "⊥", "no_claim": "∅"}[self.value]
+
+
+def normalise_class_name(name: str) -> str:
+    """'Office Chair' -> 'office_chair' (lower case, runs of non-alphanumerics to '_')."""
+    return re.sub(r"[^0-9a-z]+", "_", name.strip().lower()).strip("_")
+
+
+class PredicateSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    positive: list[str] = Field(min_length=1)
+    negative: list[str] = Field(default_factory=list)
+    aliases: list[str] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _disjoint(self) -> PredicateSpec:
+        both = set(self.positive) & set(self.negative)
+        if both:
+            raise ValueError(f"labels {sorted(both)} are in both the positive and the negative set")
+        return self
+
+
+class VocabularyFile(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    format: str = "sgbelief.vocabulary"
+    version: int = 1
+    name: str = "vocabulary"
+    labels: list[str] | None = None
+    predicates: dict[str, PredicateSpec]
+
+    @field_validator("predicates")
+    @classmethod
+    def _non_empty(cls, v: dict[str, PredicateSpec]) -> dict[str, PredicateSpec]:
+        if not v:
+            raise ValueError("at least one predicate is required")
+        for name in v:
+            if not name or not name.strip():
+                raise ValueError("predicate names must be non-empty")
+        return v
+
+    @model_validator(mode="after")
+    def _labels_known(self) -> VocabularyFile:
+        if self.labels is not None:
+            known = set(self.labels)
+            for pred, spec in self.predicates.items():
+                unknown = (set(spec.positive) | set(spec.negative)) - known
+                if unknown:
+                    raise ValueError(f"predicate {pred!r} uses labels {sorted(unknown)} missing from 'labels'")
+        return self
+
+
+class SubsumptionTable:
+    """Per-predicate positive and negative label sets.
+
+    ``outcome(phi, label)`` is 1 when the label is in phi's positive set, 0 when it is in the
+    negative set, None otherwise: the calibration outcome y (§4.1). ``verdict(phi, label, c)``
+    is T / ⊥ / ∅ from the same sets, with T and ⊥ swapped when c < 0.5 (the claim leans to
+    "not phi"; Alg. 1 line 5).
+    """
+
+    def __init__(
+        self,
+        predicates: Mapping[str, PredicateSpec | Mapping[str, Any]],
+        *,
+        name: str = "vocabulary",
+        labels: Iterable[str] | None = None,
+    ) -> None:
+        try:
+            parsed = VocabularyFile(predicates=dict(predicates), name=name, labels=list(labels) if labels else None)
+        except ValidationError as exc:
+            raise ConfigError(_pydantic_message(exc, "vocabulary")) from exc
+        self._init(parsed)
+
+    def _init(self, parsed: VocabularyFile) -> None:
+        self.name = parsed.name
+        self.specs: dict[str, PredicateSpec] = dict(parsed.predicates)
+        self.labels: frozenset[str] | None = frozenset(parsed.labels) if parsed.labels else None
+        self._outcomes: dict[str, dict[str, int]] = {}
+        self._alias: dict[str, str] = {}
+        for pred, spec in self.specs.items():
+            table = {lab: 0 for lab in spec.negative}
+            table.update({lab: 1 for lab in spec.positive})
+            self._outcomes[pred] = table
+            for alias in [*spec.aliases, *spec.positive]:
+                self._alias.setdefault(normalise_class_name(alias), pred)
+            self._alias.setdefault(normalise_class_name(pred.removeprefix("is_")), pred)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> SubsumptionTable:
+        """Load ``predicates: {phi: {positive: [...], negative: [...], aliases: [...]}}``."""
+        p = Path(path)
+        try:
+            raw = yaml.safe_load(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            line = mark.line + 1 if mark is not None else None
+            raise FormatError(f"malformed YAML: {getattr(exc, 'problem', exc)}", path=p, line=line) from exc
+        if not isinstance(raw, dict):
+            raise FormatError("a vocabulary file must be a YAML mapping with a 'predicates' key", path=p)
+        try:
+            parsed = VocabularyFile.model_validate(raw)
+        except ValidationError as exc:
+            raise ConfigError(f"{p}: {_pydantic_message(exc, '')}") from exc
+        table = cls.__new__(cls)
+        table._init(parsed)
+        return table
+
+    @classmethod
+    def shipped(cls, name: str) -> SubsumptionTable:
+        """One of the vocabularies in ``configs/vocab`` (``scannet``, ``kitti360``)."""
+        from sgbelief.resources import config_path
+
+        return cls.from_yaml(config_path("vocab", f"{name}.yaml"))
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def predicates(self) -> list[str]:
+        return list(self.specs)
+
+    def __contains__(self, predicate: object) -> bool:
+        return predicate in self.specs
+
+    def require(self, predicate: str) -> None:
+        if predicate not in self.specs:
+            raise UnknownPredicateError(predicate, self.specs)
+
+    def outcome(self, predicate: str, label: str | None) -> int | None:
+        """Calibration outcome y for (phi, geometric label): 1, 0 or None (not decisive)."""
+        if label is None:
+            return None
+        table = self._outcomes.get(predicate)
+        return None if table is None else table.get(label)
+
+    def verdict(self, predicate: str, label: str | None, confidence: float) -> Verdict:
+        """compat(phi_f, phi_g) with the sign flip for c < 0.5."""
+        y = self.outcome(predicate, label)
+        if y is None:
+            return Verdict.NO_CLAIM
+        agrees = (y == 1) == (confidence >= 0.5)
+        return Verdict.CORROBORATES if agrees else Verdict.CONTRADICTS
+
+    def predicate_for_class(self, class_name: str) -> str | None:
+        """The predicate a detector class name asserts (via aliases / positive labels), or None."""
+        return self._alias.get(normalise_class_name(class_name))
+
+    def outcome_tables(self) -> dict[str, dict[str, int]]:
+        """label -> y per predicate (read-only use in hot loops)."""
+        return self._outcomes
+
+    def __repr__(self) -> str:
+        return f"SubsumptionTable(name={self.name!r}, predicates={self.predicates})"
+
+
+def _pydantic_message(exc: ValidationError, prefix: str) -> str:
+    parts = []
+    for err in exc.errors()[:3]:
+        loc = ".".join(str(x) for x in err["loc"])
+        key = f"{prefix}.{loc}" if prefix and loc else (loc or prefix)
+        parts.append(f"key '{key}': {err['msg']}")
+    return "; ".join(parts)

@@ -1,0 +1,117 @@
+"""Operator hyperparameters (Table 1) as a validated, immutable pydantic model."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from sgbelief.errors import ConfigError, FormatError
+
+
+class _Frozen(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class CalibrationConfig(_Frozen):
+    """Knobs of the Mondrian isotonic calibrator and the conformal sets (§4.1)."""
+
+    target_size: int = Field(50, ge=1, description="kappa_hat = min(1, effective size / target_size)")
+    kappa_min: float = Field(0.05, gt=0.0, le=1.0, description="floor of kappa_hat")
+    lr_max: float = Field(1000.0, gt=1.0, description="Lambda_hat clipped to [1/lr_max, lr_max]")
+    refit_growth: float = Field(0.1, gt=0.0, description="refit after the slice grew by this fraction")
+    min_refit: int = Field(8, ge=1, description="... or by at least this many outcomes")
+    cold_start: Literal["raw", "neutral"] = "raw"
+    adaptive_gamma: float = Field(0.005, ge=0.0, lt=1.0, description="adaptive conformal step size")
+
+
+class OverwriteConfig(_Frozen):
+    strength: float = Field(9.0, gt=0.0, description="pseudo-counts of the belief an event overwrites to")
+
+
+class MajorityConfig(_Frozen):
+    pass
+
+
+class NaiveBayesConfig(_Frozen):
+    reliability: float = Field(0.8, ge=0.5, le=1.0, description="fixed assumed reliability r")
+
+
+class RefinedConfig(_Frozen):
+    window: int = Field(10, ge=1, description="last N claims per (v, phi) kept by the temporal filter")
+    min_support: int = Field(3, ge=1, description="claims needed before the filter asserts anything")
+
+
+class BaselinesConfig(_Frozen):
+    overwrite: OverwriteConfig = OverwriteConfig()
+    majority: MajorityConfig = MajorityConfig()
+    naive_bayes: NaiveBayesConfig = NaiveBayesConfig()
+    refined: RefinedConfig = RefinedConfig()
+
+
+class OperatorConfig(_Frozen):
+    """Hyperparameters of the operators; defaults are the paper's (Table 1) plus tau_T = 0.1."""
+
+    format: Literal["sgbelief.operator_config"] = "sgbelief.operator_config"
+    version: int = 1
+    alpha: float = Field(0.1, gt=0.0, lt=1.0, description="conformal miscoverage level")
+    tau_rev: float = Field(0.5, gt=0.0, description="revision threshold on KL(B || B'), nats")
+    t_cor: int = Field(10, ge=0, description="corroboration window of the quarantine Q")
+    k: float = Field(4.0, ge=1.0, description="timeout release weight divisor (w / k)")
+    w0: float = Field(1.0, gt=0.0, description="base per-evidence weight")
+    t_prov: int = Field(1000, ge=1, description="provenance compaction horizon")
+    t_disagree: int = Field(10, ge=0, description="conflict-drop window of Q_bot")
+    tau: float = Field(0.5, ge=0.0, lt=1.0, description="commit threshold")
+    tau_t: float = Field(0.1, ge=0.0, lt=1.0, description="targeting-mass threshold")
+    calibration: CalibrationConfig = CalibrationConfig()
+    baselines: BaselinesConfig = BaselinesConfig()
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> OperatorConfig:
+        p = Path(path)
+        try:
+            raw = yaml.safe_load(p.read_text(encoding="utf-8"))
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            raise FormatError(
+                f"malformed YAML: {getattr(exc, 'problem', exc)}", path=p, line=mark.line + 1 if mark else None
+            ) from exc
+        if raw is None:
+            raw = {}
+        if not isinstance(raw, dict):
+            raise ConfigError(f"{p}: an operator config must be a YAML mapping")
+        return cls.from_mapping(raw, source=str(p))
+
+    @classmethod
+    def from_mapping(cls, data: dict[str, Any], *, source: str = "config") -> OperatorConfig:
+        try:
+            return cls.model_validate(data)
+        except ValidationError as exc:
+            msgs = []
+            for err in exc.errors()[:3]:
+                key = ".".join(str(x) for x in err["loc"])
+                msgs.append(f"key '{key}': {err['msg']}")
+            raise ConfigError(f"{source}: " + "; ".join(msgs)) from exc
+
+    @classmethod
+    def default(cls) -> OperatorConfig:
+        """The shipped ``configs/operators/default.yaml`` (equal to the code defaults)."""
+        from sgbelief.resources import config_path
+
+        try:
+            return cls.from_yaml(config_path("operators", "default.yaml"))
+        except FileNotFoundError:
+            return cls()
+
+
+def resolve_config(config: OperatorConfig | dict[str, Any] | str | Path | None) -> OperatorConfig:
+    """Accept a config instance, a mapping, a YAML path, or None (defaults)."""
+    if config is None:
+        return OperatorConfig()
+    if isinstance(config, OperatorConfig):
+        return config
+    if isinstance(config, dict):
+        return OperatorConfig.from_mapping(config)
+    return OperatorConfig.from_yaml(config)

@@ -1,0 +1,93 @@
+"""Conformal prediction sets over the binary outcome {0, 1} (§4.1 Eq. 1, Prop. 1, Gibbs & Candès 2021)."""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from dataclasses import dataclass
+
+import numpy as np
+
+_EPS = 1e-12
+
+
+def nonconformity(c: float, y: int) -> float:
+    """Eq. 1: s(e, y) = -y log c - (1 - y) log(1 - c), the model's negative log-likelihood of y."""
+    c = min(max(c, _EPS), 1.0 - _EPS)
+    return -math.log(c) if y == 1 else -math.log(1.0 - c)
+
+
+def conformal_quantile(sorted_scores: np.ndarray | list[float], alpha: float) -> float:
+    """Finite-sample split-conformal threshold: the ceil((n+1)(1-alpha))-th smallest score.
+
+    Returns +inf when that rank exceeds n (too few scores for a finite threshold: full set),
+    and -inf when alpha >= 1 (empty set).
+    """
+    n = len(sorted_scores)
+    if alpha >= 1.0:
+        return -math.inf
+    rank = math.ceil((n + 1) * (1.0 - alpha))
+    if rank > n or n == 0:
+        return math.inf
+    if rank < 1:
+        return -math.inf
+    return float(sorted_scores[rank - 1])
+
+
+@dataclass(frozen=True, slots=True)
+class PredictionSet:
+    """A (1 - alpha) prediction set over {0, 1}, or an explicit "no coverage claim".
+
+    ``labels`` is the set; ``coverage`` the nominal level when a claim applies, None outside the
+    calibratable regime R (Property 1), with ``reason`` saying why.
+    """
+
+    labels: frozenset[int]
+    coverage: float | None
+    n_calibration: int = 0
+    reason: str = ""
+
+    @property
+    def claims_coverage(self) -> bool:
+        return self.coverage is not None
+
+    def __contains__(self, y: object) -> bool:
+        return y in self.labels
+
+
+def no_coverage(reason: str) -> PredictionSet:
+    return PredictionSet(frozenset({0, 1}), None, 0, f"no coverage claim: {reason}")
+
+
+class ConformalSlice:
+    """Scores of one calibration slice, the static threshold and the adaptive level alpha_t.
+
+    Scores are appended in O(1); the sorted view is rebuilt lazily (amortised, see ``refresh``),
+    so queries are O(1) after a refresh. The adaptive variant updates alpha_t online:
+    alpha_{t+1} = alpha_t + gamma (alpha - err_t), err_t = 1 when y_t was not in the set.
+    """
+
+    __slots__ = ("scores", "sorted", "n_sorted", "alpha_t", "n_err", "n_seen")
+
+    def __init__(self, alpha: float) -> None:
+        self.scores: list[float] = []
+        self.sorted: list[float] = []
+        self.n_sorted = 0
+        self.alpha_t = alpha
+        self.n_err = 0
+        self.n_seen = 0
+
+    def refresh(self) -> None:
+        self.sorted = sorted(self.scores)
+        self.n_sorted = len(self.sorted)
+
+    def threshold(self, alpha: float) -> float:
+        return conformal_quantile(self.sorted, alpha)
+
+    def coverage_of_rank(self, q: float) -> int:
+        return bisect_right(self.sorted, q)
+
+
+def prediction_set(c: float, q: float) -> frozenset[int]:
+    """{y in {0, 1} : s(c, y) <= q}."""
+    return frozenset(y for y in (0, 1) if nonconformity(c, y) <= q)

@@ -1,0 +1,22 @@
+"""The six fusion operators."""
+
+from __future__ import annotations
+
+from sgbelief.fusion.operators.base import BaseOperator
+from sgbelief.fusion.operators.baselines import (
+    MajorityVoteOperator,
+    NaiveBayesOperator,
+    OverwriteOperator,
+    RefinedOperator,
+)
+from sgbelief.fusion.operators.calibrated import CalibratedOperator, CoModulatedOperator
+
+__all__ = [
+    "BaseOperator",
+    "OverwriteOperator",
+    "MajorityVoteOperator",
+    "NaiveBayesOperator",
+    "RefinedOperator",
+    "CalibratedOperator",
+    "CoModulatedOperator",
+]

@@ -1,0 +1,142 @@
+"""Shared machinery of the operators: time ticks, compaction schedule, targeting filter, stats."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from sgbelief.errors import UnknownPredicateError
+from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
+from sgbelief.fusion.config import OperatorConfig, resolve_config
+from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport
+from sgbelief.fusion import queues
+
+if TYPE_CHECKING:  # pragma: no cover
+    from sgbelief.fusion.channel import GeometricChannel
+    from sgbelief.fusion.events import EvidenceEvent
+    from sgbelief.graph.scene_graph import SceneGraph
+
+_NO_CLAIM = Verdict.NO_CLAIM
+_CORR = Verdict.CORROBORATES
+_CONTRA = Verdict.CONTRADICTS
+
+
+class BaseOperator:
+    """Common base of the six operators (all implement :class:`~sgbelief.fusion.protocol.FusionOperator`).
+
+    Subclasses implement :meth:`_increment` (baselines) or override :meth:`update`.
+    ``vocabulary`` (a SubsumptionTable) is needed for verdicts and calibration outcomes;
+    baselines only use it to report the verdict they ignore.
+    """
+
+    name = "base"
+
+    def __init__(
+        self,
+        config: OperatorConfig | dict[str, Any] | str | None = None,
+        vocabulary: SubsumptionTable | None = None,
+    ) -> None:
+        self.config = resolve_config(config)
+        self.vocabulary = vocabulary
+        self.stats: dict[str, int] = {
+            "events": 0,
+            "targets": 0,
+            "committed": 0,
+            "refused": 0,
+            "quarantined": 0,
+            "released": 0,
+            "corroborated": 0,
+            "discarded": 0,
+            "resolved": 0,
+            "expired": 0,
+            "below_tau_t": 0,
+            "compacted": 0,
+        }
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r})"
+
+    # ---------------------------------------------------------------- time
+    def tick(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
+        """Advance to time t: queue timeouts, then compaction every T_prov steps (Alg. 1, last lines)."""
+        if t <= graph.clock:
+            return []
+        graph.clock = t
+        cfg = self.config
+        out = self._timeouts(graph, t)
+        epoch = t // cfg.t_prov
+        if epoch > graph.meta.get("compaction_epoch", 0):
+            graph.meta["compaction_epoch"] = epoch
+            self.stats["compacted"] += graph.provenance.compact(t - cfg.t_prov)
+        return out
+
+    def _timeouts(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
+        return []
+
+    def _count(self, resolutions: list[QueueResolution]) -> None:
+        stats = self.stats
+        for r in resolutions:
+            stats[r.kind] = stats.get(r.kind, 0) + 1
+
+    # -------------------------------------------------------------- update
+    def _check(self, graph: SceneGraph, event: EvidenceEvent) -> None:
+        vocab = graph.vocabulary
+        if vocab is not None and event.predicate not in vocab:
+            raise UnknownPredicateError(event.predicate, vocab)
+
+    def _verdict(self, label: str | None, predicate: str, c: float) -> Verdict:
+        if label is None or self.vocabulary is None:
+            return _NO_CLAIM
+        y = self.vocabulary.outcome(predicate, label)
+        if y is None:
+            return _NO_CLAIM
+        return _CORR if (y == 1) == (c >= 0.5) else _CONTRA
+
+    def update(
+        self, graph: SceneGraph, event: EvidenceEvent, channel: GeometricChannel | None = None
+    ) -> UpdateReport:
+        """Apply one event with the subclass's increment rule (baselines ignore the verdict)."""
+        self._check(graph, event)
+        resolutions = self.tick(graph, event.t) if event.t > graph.clock else []
+        tau_t = self.config.tau_t
+        prov = graph.provenance
+        pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
+        outcomes = []
+        stats = self.stats
+        stats["events"] += 1
+        for node, mass in event.targets.items():
+            stats["targets"] += 1
+            label = channel.label(node, t) if channel is not None else None
+            verdict = self._verdict(label, pred, c)
+            if mass <= tau_t:
+                stats["below_tau_t"] += 1
+                outcomes.append(TargetOutcome(node, mass, verdict, Action.BELOW_THRESHOLD))
+                continue
+            graph.ensure_node(node)
+            inc = self._increment(graph, node, pred, c, mass)
+            if inc is None:
+                outcomes.append(TargetOutcome(node, mass, verdict, Action.IGNORED))
+                continue
+            da, db = inc
+            prov.record(node, pred, eid, t, da, db, stance=1 if da > db else -1 if da < db else 0)
+            stats["committed"] += 1
+            outcomes.append(TargetOutcome(node, mass, verdict, Action.COMMITTED, da, db))
+        return UpdateReport(eid, t, pred, tuple(outcomes), tuple(resolutions))
+
+    def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float] | None:
+        raise NotImplementedError
+
+    # ------------------------------------------------------------ reading
+    def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float:
+        """Posterior mean of B(v, phi)."""
+        return graph.probability(node, predicate)
+
+    # ------------------------------------------------------- user actions
+    def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
+        """Retract an event exactly (cascading to corroborating events within T_cor)."""
+        return graph.provenance.retract(event_id, cascade_window=self.config.t_cor)
+
+    def confirm(self, graph: SceneGraph, event_id: str, *, accept: bool = True) -> list[QueueResolution]:
+        """Explicit operator confirmation of a queued (quarantined or refused) event."""
+        out = queues.confirm(graph.provenance, event_id, accept=accept, t=max(graph.clock, 0))
+        self._count(out)
+        return out

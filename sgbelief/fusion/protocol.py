@@ -1,0 +1,81 @@
+"""The FusionOperator protocol every operator implements, and its report types."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+from sgbelief.fusion.compatibility import Verdict
+
+if TYPE_CHECKING:  # pragma: no cover
+    from sgbelief.fusion.channel import GeometricChannel
+    from sgbelief.fusion.events import EvidenceEvent
+    from sgbelief.graph.scene_graph import SceneGraph
+
+
+class Action(str, Enum):
+    """What an operator did with one targeted element of an event."""
+
+    COMMITTED = "committed"  #: increments applied to the belief
+    REFUSED = "refused"  #: ⊥: not committed, routed to the disagreement queue (comod only)
+    QUARANTINED = "quarantined"  #: revision: held in the quarantine Q
+    BELOW_THRESHOLD = "below_tau_t"  #: targeting mass <= tau_T: discarded
+    IGNORED = "ignored"  #: the operator's rule does not use this event (e.g. overwrite on low c)
+
+
+@dataclass(frozen=True, slots=True)
+class TargetOutcome:
+    node: Any
+    mass: float
+    verdict: Verdict
+    action: Action
+    d_alpha: float = 0.0
+    d_beta: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class QueueResolution:
+    """A queued event leaving its queue: kind in corroborated / released / discarded /
+    resolved / expired / confirmed / dismissed."""
+
+    event_id: str | None
+    node: Any
+    predicate: str
+    kind: str
+    t: int
+
+
+@dataclass(frozen=True, slots=True)
+class UpdateReport:
+    """Per targeted node: the verdict, the action and the increments; plus queue resolutions."""
+
+    event_id: str
+    t: int
+    predicate: str
+    targets: tuple[TargetOutcome, ...]
+    resolutions: tuple[QueueResolution, ...] = ()
+
+    def actions(self) -> dict[Any, Action]:
+        return {o.node: o.action for o in self.targets}
+
+
+@runtime_checkable
+class FusionOperator(Protocol):
+    """An update operator U : M x E -> M (Def. 3) with time ticks for its queues.
+
+    - ``update(graph, event, channel)`` applies one evidence event and reports what happened
+      to each targeted element (it first advances time to ``event.t``);
+    - ``tick(graph, t)`` advances time without evidence (queue timeouts, compaction);
+    - ``probability(graph, node, predicate)`` is the operator's probability that the predicate holds.
+    """
+
+    name: str
+
+    def update(
+        self, graph: SceneGraph, event: EvidenceEvent, channel: GeometricChannel | None = None
+    ) -> UpdateReport: ...
+
+    def tick(self, graph: SceneGraph, t: int) -> list[QueueResolution]: ...
+
+    def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float: ...

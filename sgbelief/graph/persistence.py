@@ -1,0 +1,189 @@
+"""Lossless, versioned, atomic JSON persistence of a :class:`SceneGraph`.
+
+File layout (``format: sgbelief.scene_graph``, ``version: 1``)::
+
+    {"format": "sgbelief.scene_graph", "version": 1, "created_by": "sgbelief X.Y.Z",
+     "vocabulary": [...] | null, "clock": int, "meta": {...},
+     "graph": <networkx node-link data, edges under "edges">,
+     "provenance": {"prior": [a0, b0], "pairs": [{"node", "predicate", "alpha", "beta",
+                    "entries": [[event_id, t, d_alpha, d_beta, status, stance, corroborated_by, n_folded], ...]}],
+                    "compacted_ids": [...], "n_compacted": int}}
+
+The queues (revision quarantine Q, disagreement queue Q⊥) are the pending entries of the
+provenance log, so they round-trip with it. Loading validates the envelope with pydantic and
+checks Eq. 5 (stored belief = prior + logged increments) for every pair.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from sgbelief.errors import FormatError
+from sgbelief.graph.provenance import ProvenanceStore
+from sgbelief.graph.scene_graph import SceneGraph
+
+FORMAT = "sgbelief.scene_graph"
+VERSION = 1
+GRAPH_FILE = "graph.json"
+_TUPLE_ATTRS = ("centroid",)
+
+
+class _Envelope(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    format: Literal["sgbelief.scene_graph"]
+    version: int
+    vocabulary: list[str] | None = None
+    clock: int = -1
+    meta: dict[str, Any] = {}
+    graph: dict[str, Any]
+    provenance: dict[str, Any]
+
+
+def resolve_graph_path(path: str | Path) -> Path:
+    """``x.json`` stays as is; anything else is a directory holding ``graph.json``."""
+    p = Path(path)
+    return p if p.suffix == ".json" else p / GRAPH_FILE
+
+
+def _jsonable(value: Any, where: str) -> Any:
+    if value is None or isinstance(value, (str, bool, int)):
+        return value
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ValueError(f"{where}: non-finite float {value!r} cannot be saved")
+        return value
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v, where) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v, where) for k, v in value.items()}
+    tolist = getattr(value, "tolist", None)  # numpy arrays and scalars
+    if callable(tolist):
+        return _jsonable(tolist(), where)
+    raise TypeError(f"{where}: value of type {type(value).__name__} is not JSON-serialisable")
+
+
+def graph_to_dict(graph: SceneGraph) -> dict[str, Any]:
+    g = graph.nx
+    nodes = []
+    for n, data in g.nodes(data=True):
+        entry = {"id": n}
+        for k, v in data.items():
+            entry[k] = _jsonable(v, f"node {n!r} attribute {k!r}")
+        nodes.append(entry)
+    edges = []
+    for u, v, k, data in g.edges(keys=True, data=True):
+        entry = {"source": u, "target": v, "key": k}
+        for name, val in data.items():
+            entry[name] = _jsonable(val, f"edge {u!r}->{v!r} attribute {name!r}")
+        edges.append(entry)
+    from sgbelief import __version__
+
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "created_by": f"sgbelief {__version__}",
+        "vocabulary": sorted(graph.vocabulary) if graph.vocabulary is not None else None,
+        "clock": graph.clock,
+        "meta": _jsonable(graph.meta, "meta"),
+        "graph": {"directed": True, "multigraph": True, "graph": dict(g.graph), "nodes": nodes, "edges": edges},
+        "provenance": graph.provenance.to_dict(),
+    }
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically: temp file in the same directory, fsync, rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def save_graph(graph: SceneGraph, path: str | Path) -> Path:
+    """Serialise first (so an unserialisable attribute fails before touching disk), then write atomically."""
+    target = resolve_graph_path(path)
+    text = json.dumps(graph_to_dict(graph), separators=(",", ":"), allow_nan=False)
+    atomic_write_text(target, text)
+    return target
+
+
+def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGraph:
+    try:
+        env = _Envelope.model_validate(doc)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        loc = ".".join(str(x) for x in first["loc"])
+        raise FormatError(f"field '{loc}': {first['msg']}", path=source) from exc
+    if env.version > VERSION:
+        raise FormatError(f"file has schema version {env.version}; this sgbelief reads up to {VERSION}", path=source)
+    graph = SceneGraph(vocabulary=env.vocabulary)
+    graph.clock = env.clock
+    graph.meta = dict(env.meta)
+    try:
+        g = graph.nx
+        g.graph.update(env.graph.get("graph", {}))
+        for i, node in enumerate(env.graph["nodes"]):
+            attrs = dict(node)
+            n = attrs.pop("id")
+            if isinstance(n, bool) or not isinstance(n, (str, int)):
+                raise FormatError(f"field 'graph.nodes[{i}].id' must be a string or integer", path=source)
+            for key in _TUPLE_ATTRS:
+                if attrs.get(key) is not None:
+                    attrs[key] = tuple(float(x) for x in attrs[key])
+            if attrs.get("bbox") is not None:
+                attrs["bbox"] = tuple(tuple(float(x) for x in corner) for corner in attrs["bbox"])
+            g.add_node(n, **attrs)
+        for i, edge in enumerate(env.graph["edges"]):
+            attrs = dict(edge)
+            u, v, k = attrs.pop("source"), attrs.pop("target"), attrs.pop("key")
+            if u not in g or v not in g:
+                raise FormatError(f"field 'graph.edges[{i}]' refers to an unknown node", path=source)
+            g.add_edge(u, v, key=k, **attrs)
+    except FormatError:
+        raise
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FormatError(f"field 'graph': malformed node-link data ({type(exc).__name__}: {exc})", path=source) from exc
+    try:
+        graph.provenance = ProvenanceStore.from_dict(env.provenance)
+    except FormatError as exc:
+        raise FormatError(str(exc), path=source) from exc
+    for node, _pred in graph.provenance.pairs():
+        if node not in g:
+            raise FormatError(f"provenance refers to node {node!r} that the graph does not contain", path=source)
+    return graph
+
+
+def load_graph(path: str | Path) -> SceneGraph:
+    """Read a saved graph; truncated, edited or hostile JSON raises FormatError (line and field)."""
+    target = resolve_graph_path(path)
+    if not target.exists():
+        raise FileNotFoundError(f"no saved scene graph at {target}")
+    try:
+        with open(target, encoding="utf-8") as fh:
+            doc = json.load(fh)
+    except json.JSONDecodeError as exc:
+        raise FormatError(f"invalid JSON: {exc.msg} (column {exc.colno})", path=target, line=exc.lineno) from exc
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text: {exc}", path=target) from exc
+    if not isinstance(doc, dict):
+        raise FormatError("top level must be a JSON object", path=target)
+    return graph_from_dict(doc, source=str(target))
+
+
+__all__ = ["save_graph", "load_graph", "graph_to_dict", "graph_from_dict", "atomic_write_text", "resolve_graph_path"]

@@ -1,0 +1,595 @@
+"""Provenance store P (paper §4.3, Eq. 5): an ordered log of increments per (node, predicate).
+
+Every update an operator makes to a belief is an entry ``(event id, t, d_alpha, d_beta, status)``
+in the log of its (node, predicate) pair. The belief is *defined* by the log::
+
+    (alpha, beta) = (alpha_0, beta_0) + sum of (d_alpha, d_beta) over counted entries   (Eq. 5)
+
+where the counted statuses are committed, released (revision timeout at weight w/k),
+confirmed and compacted. Refused (⊥) and quarantined entries carry the increments the event
+*would* contribute but are not counted while they sit in the disagreement queue Q⊥ or the
+revision quarantine Q; those queues are simply the pending entries of the store, so they are
+saved, loaded and migrated with the graph.
+
+The store keeps a running (alpha, beta) cache per pair so that reads are O(1); retraction and
+merges recompute the cache from the log with ``math.fsum``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Hashable, Iterable, Iterator
+from enum import Enum
+from typing import Any
+
+from sgbelief.errors import FormatError, RetractionError
+from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA, BetaBelief
+
+Node = Hashable
+PairKey = tuple[Any, str]
+
+
+class EntryStatus(str, Enum):
+    """Life-cycle status of a provenance entry."""
+
+    COMMITTED = "committed"  #: applied to the belief (Eq. 4)
+    REFUSED = "refused"  #: ⊥ verdict: refused, pending in the disagreement queue Q⊥
+    RESOLVED = "resolved"  #: ⊥ later corroborated by ⊤ within T_disagree; never committed
+    EXPIRED = "expired"  #: ⊥ released on timeout, unresolved; never committed
+    DISMISSED = "dismissed"  #: ⊥ closed by an explicit operator decision without committing
+    QUARANTINED = "quarantined"  #: revision (KL > tau_rev) pending in the quarantine Q
+    RELEASED = "released"  #: revision released on timeout, committed at reduced weight w/k
+    DISCARDED = "discarded"  #: revision disconfirmed within T_cor; never committed
+    CONFIRMED = "confirmed"  #: committed by an explicit operator confirmation
+    COMPACTED = "compacted"  #: several old entries folded into one equivalent increment
+
+
+#: statuses whose increments count in the belief (Eq. 5)
+COUNTED: frozenset[EntryStatus] = frozenset(
+    {EntryStatus.COMMITTED, EntryStatus.RELEASED, EntryStatus.CONFIRMED, EntryStatus.COMPACTED}
+)
+#: statuses of entries still waiting in a queue
+PENDING: frozenset[EntryStatus] = frozenset({EntryStatus.REFUSED, EntryStatus.QUARANTINED})
+
+_STATUS_BY_VALUE = {s.value: s for s in EntryStatus}
+
+
+class ProvenanceEntry:
+    """One log entry. Mutable only through :class:`ProvenanceStore` (status transitions)."""
+
+    __slots__ = (
+        "event_id",
+        "t",
+        "d_alpha",
+        "d_beta",
+        "status",
+        "node",
+        "predicate",
+        "stance",
+        "corroborated_by",
+        "n_folded",
+        "alive",
+    )
+
+    def __init__(
+        self,
+        event_id: str | None,
+        t: int,
+        d_alpha: float,
+        d_beta: float,
+        status: EntryStatus,
+        node: Any,
+        predicate: str,
+        stance: int = 0,
+    ) -> None:
+        self.event_id = event_id
+        self.t = t
+        self.d_alpha = d_alpha
+        self.d_beta = d_beta
+        self.status = status
+        self.node = node
+        self.predicate = predicate
+        #: +1 when the evidence supports the predicate, -1 when it denies it, 0 neutral
+        self.stance = stance
+        #: ids of events whose corroboration committed this (revision) entry
+        self.corroborated_by: list[str] | None = None
+        #: number of original entries a compacted entry stands for
+        self.n_folded = 1
+        #: False once retracted or folded away
+        self.alive = True
+
+    @property
+    def counted(self) -> bool:
+        return self.status in COUNTED
+
+    @property
+    def pending(self) -> bool:
+        return self.status in PENDING
+
+    def as_tuple(self) -> tuple[str | None, int, float, float, str]:
+        """(event id, t, d_alpha, d_beta, status) as in the paper's log."""
+        return (self.event_id, self.t, self.d_alpha, self.d_beta, self.status.value)
+
+    def __repr__(self) -> str:
+        return (
+            f"ProvenanceEntry(event_id={self.event_id!r}, t={self.t}, d_alpha={self.d_alpha:.6g}, "
+            f"d_beta={self.d_beta:.6g}, status={self.status.value}, node={self.node!r}, "
+            f"predicate={self.predicate!r})"
+        )
+
+
+class _PairLog:
+    __slots__ = ("alpha", "beta", "entries")
+
+    def __init__(self, alpha: float, beta: float) -> None:
+        self.alpha = alpha
+        self.beta = beta
+        self.entries: list[ProvenanceEntry] = []
+
+
+class ProvenanceStore:
+    """Per-(node, predicate) ordered logs of belief increments, with retraction and compaction.
+
+    Parameters
+    ----------
+    prior:
+        (alpha_0, beta_0) of every pair; Beta(1, 1) by default.
+    remember_compacted:
+        How many compacted event ids are remembered so that retracting one of them gives a
+        precise error (bounded so memory does not grow with the stream length).
+    """
+
+    def __init__(
+        self,
+        prior: tuple[float, float] = (PRIOR_ALPHA, PRIOR_BETA),
+        *,
+        remember_compacted: int = 100_000,
+    ) -> None:
+        self.prior_alpha, self.prior_beta = float(prior[0]), float(prior[1])
+        self.remember_compacted = int(remember_compacted)
+        self._pairs: dict[PairKey, _PairLog] = {}
+        self._by_event: dict[str, list[ProvenanceEntry]] = {}
+        # every live, not-yet-compacted entry in arrival order (drives amortised compaction)
+        self._timeline: deque[ProvenanceEntry] = deque()
+        self._compacted_ids: set[str] = set()
+        self._compacted_order: deque[str] = deque()
+        self.n_compacted = 0
+        # queues: pending entries in arrival order (lazy deletion) and indexed by pair
+        self.quarantine: deque[ProvenanceEntry] = deque()
+        self.disagreement: deque[ProvenanceEntry] = deque()
+        self._pending_by_pair: dict[PairKey, list[ProvenanceEntry]] = {}
+
+    # ------------------------------------------------------------------ reads
+    def __len__(self) -> int:
+        return len(self._pairs)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._pairs
+
+    def alpha_beta(self, node: Any, predicate: str) -> tuple[float, float]:
+        """Current (alpha, beta) of a pair (the prior when it has no entry). O(1)."""
+        log = self._pairs.get((node, predicate))
+        if log is None:
+            return self.prior_alpha, self.prior_beta
+        return log.alpha, log.beta
+
+    def belief(self, node: Any, predicate: str) -> BetaBelief:
+        a, b = self.alpha_beta(node, predicate)
+        return BetaBelief(a, b)
+
+    def mean(self, node: Any, predicate: str) -> float:
+        a, b = self.alpha_beta(node, predicate)
+        return a / (a + b)
+
+    def entries(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
+        """The pair's log in order (a copy of the list; entries are live objects)."""
+        log = self._pairs.get((node, predicate))
+        return list(log.entries) if log is not None else []
+
+    def event_entries(self, event_id: str) -> list[ProvenanceEntry]:
+        return list(self._by_event.get(event_id, ()))
+
+    def has_event(self, event_id: str) -> bool:
+        return event_id in self._by_event
+
+    def pairs(self) -> Iterator[PairKey]:
+        return iter(self._pairs)
+
+    def predicates(self) -> set[str]:
+        return {p for _, p in self._pairs}
+
+    def predicates_of(self, node: Any) -> list[str]:
+        return [p for (n, p) in self._pairs if n == node]
+
+    def nodes_with(self, predicate: str) -> Iterator[Any]:
+        return (n for (n, p) in self._pairs if p == predicate)
+
+    def pending(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
+        return list(self._pending_by_pair.get((node, predicate), ()))
+
+    def count_entries(self, node: Any = None) -> int:
+        """Number of original evidence entries (compacted entries count what they folded)."""
+        total = 0
+        for (n, _p), log in self._pairs.items():
+            if node is not None and n != node:
+                continue
+            total += sum(e.n_folded for e in log.entries)
+        return total
+
+    def reconstruct(self, node: Any, predicate: str) -> tuple[float, float]:
+        """Recompute (alpha, beta) from the log alone (Eq. 5), with exactly rounded sums."""
+        log = self._pairs.get((node, predicate))
+        if log is None:
+            return self.prior_alpha, self.prior_beta
+        counted = [e for e in log.entries if e.status in COUNTED]
+        return (
+            self.prior_alpha + math.fsum(e.d_alpha for e in counted),
+            self.prior_beta + math.fsum(e.d_beta for e in counted),
+        )
+
+    # ------------------------------------------------------------------ writes
+    def record(
+        self,
+        node: Any,
+        predicate: str,
+        event_id: str | None,
+        t: int,
+        d_alpha: float,
+        d_beta: float,
+        status: EntryStatus = EntryStatus.COMMITTED,
+        *,
+        stance: int = 0,
+    ) -> ProvenanceEntry:
+        """Append an entry; counted statuses update the belief, pending ones join their queue."""
+        key = (node, predicate)
+        log = self._pairs.get(key)
+        if log is None:
+            log = self._pairs[key] = _PairLog(self.prior_alpha, self.prior_beta)
+        entry = ProvenanceEntry(event_id, t, d_alpha, d_beta, status, node, predicate, stance)
+        log.entries.append(entry)
+        if status in COUNTED:
+            log.alpha += d_alpha
+            log.beta += d_beta
+        elif status in PENDING:
+            self._add_pending(key, entry)
+        if event_id is not None:
+            bucket = self._by_event.get(event_id)
+            if bucket is None:
+                self._by_event[event_id] = [entry]
+            else:
+                bucket.append(entry)
+        self._timeline.append(entry)
+        return entry
+
+    def _add_pending(self, key: PairKey, entry: ProvenanceEntry) -> None:
+        (self.quarantine if entry.status is EntryStatus.QUARANTINED else self.disagreement).append(entry)
+        bucket = self._pending_by_pair.get(key)
+        if bucket is None:
+            self._pending_by_pair[key] = [entry]
+        else:
+            bucket.append(entry)
+
+    def _drop_pending(self, entry: ProvenanceEntry) -> None:
+        key = (entry.node, entry.predicate)
+        bucket = self._pending_by_pair.get(key)
+        if bucket is not None:
+            try:
+                bucket.remove(entry)
+            except ValueError:
+                pass
+            if not bucket:
+                del self._pending_by_pair[key]
+
+    def transition(self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0) -> None:
+        """Move an entry to a new status; ``scale`` multiplies its increments (w/k on timeout).
+
+        The belief changes exactly when the entry starts (or stops) being counted.
+        """
+        if not entry.alive:
+            raise RetractionError(f"entry of event {entry.event_id!r} is no longer in the store")
+        was_counted = entry.status in COUNTED
+        was_pending = entry.status in PENDING
+        log = self._pairs[(entry.node, entry.predicate)]
+        if was_counted:
+            log.alpha -= entry.d_alpha
+            log.beta -= entry.d_beta
+        if scale != 1.0:
+            entry.d_alpha *= scale
+            entry.d_beta *= scale
+        entry.status = status
+        if status in COUNTED:
+            log.alpha += entry.d_alpha
+            log.beta += entry.d_beta
+        if was_pending and status not in PENDING:
+            self._drop_pending(entry)
+        elif status in PENDING and not was_pending:
+            self._add_pending((entry.node, entry.predicate), entry)
+        if was_counted and status not in COUNTED:
+            self._refresh(log)
+
+    def _refresh(self, log: _PairLog) -> None:
+        counted = [e for e in log.entries if e.status in COUNTED]
+        log.alpha = self.prior_alpha + math.fsum(e.d_alpha for e in counted)
+        log.beta = self.prior_beta + math.fsum(e.d_beta for e in counted)
+
+    # ------------------------------------------------------------- retraction
+    def _closure(self, event_id: str, cascade_window: int | None) -> list[str]:
+        """The event and, transitively, the corroborating events its revision commits depend on."""
+        order: list[str] = []
+        stack = [event_id]
+        seen: set[str] = set()
+        while stack:
+            eid = stack.pop()
+            if eid in seen:
+                continue
+            seen.add(eid)
+            entries = self._by_event.get(eid)
+            if entries is None:
+                if eid in self._compacted_ids:
+                    raise RetractionError(
+                        f"event {eid!r} was folded into a compacted increment (older than the provenance "
+                        "horizon T_prov) and can no longer be retracted"
+                    )
+                if eid == event_id:
+                    raise RetractionError(
+                        f"unknown event id {eid!r} (never recorded, already retracted, or compacted "
+                        "beyond the remembered horizon)"
+                    )
+                continue  # a dependent that was already retracted on its own
+            order.append(eid)
+            for entry in entries:
+                if entry.corroborated_by:
+                    for dep in entry.corroborated_by:
+                        dep_entries = self._by_event.get(dep)
+                        if cascade_window is not None and dep_entries:
+                            if all(d.t - entry.t > cascade_window for d in dep_entries):
+                                continue
+                        stack.append(dep)
+        return order
+
+    def retract(self, event_id: str, *, cascade_window: int | None = None) -> list[str]:
+        """Remove an event's increments exactly (R of §4.3) and return the retracted event ids.
+
+        For a revision committed via corroboration, the corroborating events it depends on are
+        retracted too (cascade bounded by ``cascade_window`` = T_cor when given). The whole
+        cascade is checked before anything changes, so a failed retraction leaves the store
+        untouched.
+        """
+        ids = self._closure(event_id, cascade_window)
+        touched: set[PairKey] = set()
+        for eid in ids:
+            for entry in self._by_event.pop(eid):
+                key = (entry.node, entry.predicate)
+                if entry.status in PENDING:
+                    self._drop_pending(entry)
+                entry.alive = False
+                log = self._pairs[key]
+                log.entries.remove(entry)
+                touched.add(key)
+        for key in touched:
+            log = self._pairs[key]
+            if not log.entries:
+                del self._pairs[key]
+            else:
+                self._refresh(log)
+        return ids
+
+    # ------------------------------------------------------------- compaction
+    def compact(self, before_t: int) -> int:
+        """Fold every settled entry with ``t < before_t`` into one equivalent increment per pair.
+
+        Pending entries are never folded. Cost is amortised O(1) per entry: only pairs that
+        received entries older than the horizon are visited. Returns the number of entries folded.
+        """
+        dirty: set[PairKey] = set()
+        timeline = self._timeline
+        while timeline and timeline[0].t < before_t:
+            entry = timeline.popleft()
+            if entry.alive:
+                dirty.add((entry.node, entry.predicate))
+        folded_total = 0
+        for key in dirty:
+            log = self._pairs.get(key)
+            if log is not None:
+                folded_total += self._compact_pair(log, before_t)
+        return folded_total
+
+    def _compact_pair(self, log: _PairLog, before_t: int) -> int:
+        keep: list[ProvenanceEntry] = []
+        fold: list[ProvenanceEntry] = []
+        bucket: ProvenanceEntry | None = None
+        for entry in log.entries:
+            if entry.status is EntryStatus.COMPACTED:
+                bucket = entry
+            elif entry.t < before_t and entry.status not in PENDING:
+                fold.append(entry)
+            else:
+                keep.append(entry)
+        if not fold:
+            return 0
+        counted = [e for e in fold if e.status in COUNTED]
+        d_alpha = math.fsum(e.d_alpha for e in counted)
+        d_beta = math.fsum(e.d_beta for e in counted)
+        n = sum(e.n_folded for e in fold)
+        t_max = max(e.t for e in fold)
+        if bucket is None:
+            first = fold[0]
+            bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, EntryStatus.COMPACTED, first.node, first.predicate)
+            bucket.n_folded = n
+        else:
+            bucket.d_alpha = math.fsum((bucket.d_alpha, d_alpha))
+            bucket.d_beta = math.fsum((bucket.d_beta, d_beta))
+            bucket.n_folded += n
+            bucket.t = max(bucket.t, t_max)
+        for entry in fold:
+            entry.alive = False
+            eid = entry.event_id
+            if eid is not None:
+                bucket_list = self._by_event.get(eid)
+                if bucket_list is not None:
+                    try:
+                        bucket_list.remove(entry)
+                    except ValueError:
+                        pass
+                    if not bucket_list:
+                        del self._by_event[eid]
+                        self._remember_compacted(eid)
+        log.entries = [bucket, *keep]
+        self.n_compacted += len(fold)
+        return len(fold)
+
+    def _remember_compacted(self, event_id: str) -> None:
+        if self.remember_compacted <= 0:
+            return
+        self._compacted_ids.add(event_id)
+        self._compacted_order.append(event_id)
+        while len(self._compacted_order) > self.remember_compacted:
+            self._compacted_ids.discard(self._compacted_order.popleft())
+
+    def is_compacted(self, event_id: str) -> bool:
+        return event_id in self._compacted_ids
+
+    # -------------------------------------------------------- node life cycle
+    def remove_node(self, node: Any) -> int:
+        """Drop every log of a node (its beliefs go back to the prior). Returns entries dropped."""
+        keys = [k for k in self._pairs if k[0] == node]
+        dropped = 0
+        for key in keys:
+            log = self._pairs.pop(key)
+            for entry in log.entries:
+                entry.alive = False
+                dropped += entry.n_folded
+                if entry.status in PENDING:
+                    self._drop_pending(entry)
+                if entry.event_id is not None:
+                    bucket = self._by_event.get(entry.event_id)
+                    if bucket is not None:
+                        bucket[:] = [e for e in bucket if e is not entry]
+                        if not bucket:
+                            del self._by_event[entry.event_id]
+        return dropped
+
+    def move_node(self, absorb: Any, keep: Any) -> None:
+        """Belief migration: every log of ``absorb`` merges into the same predicate's log of ``keep``.
+
+        Entries keep their increments and statuses; logs are merged in time order and the
+        beliefs recomputed, so the evidence count is unchanged (nothing lost, nothing doubled).
+        """
+        if absorb == keep:
+            return
+        keys = [k for k in self._pairs if k[0] == absorb]
+        for key in keys:
+            src = self._pairs.pop(key)
+            dst_key = (keep, key[1])
+            dst = self._pairs.get(dst_key)
+            if dst is None:
+                dst = self._pairs[dst_key] = _PairLog(self.prior_alpha, self.prior_beta)
+            for entry in src.entries:
+                entry.node = keep
+            pend = self._pending_by_pair.pop(key, None)
+            if pend:
+                self._pending_by_pair.setdefault(dst_key, []).extend(pend)
+            merged = sorted(dst.entries + src.entries, key=lambda e: e.t)
+            # at most one compacted bucket per pair: fold a second one into the first
+            buckets = [e for e in merged if e.status is EntryStatus.COMPACTED]
+            if len(buckets) > 1:
+                head = buckets[0]
+                for extra in buckets[1:]:
+                    head.d_alpha = math.fsum((head.d_alpha, extra.d_alpha))
+                    head.d_beta = math.fsum((head.d_beta, extra.d_beta))
+                    head.n_folded += extra.n_folded
+                    head.t = max(head.t, extra.t)
+                    extra.alive = False
+                merged = [e for e in merged if e.alive]
+                merged.remove(head)
+                merged.insert(0, head)
+            dst.entries = merged
+            self._refresh(dst)
+
+    # ---------------------------------------------------------- serialisation
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (node ids must be str or int)."""
+        pairs = []
+        for (node, predicate), log in self._pairs.items():
+            pairs.append(
+                {
+                    "node": node,
+                    "predicate": predicate,
+                    "alpha": log.alpha,
+                    "beta": log.beta,
+                    "entries": [
+                        [
+                            e.event_id,
+                            e.t,
+                            e.d_alpha,
+                            e.d_beta,
+                            e.status.value,
+                            e.stance,
+                            e.corroborated_by,
+                            e.n_folded,
+                        ]
+                        for e in log.entries
+                    ],
+                }
+            )
+        return {
+            "prior": [self.prior_alpha, self.prior_beta],
+            "pairs": pairs,
+            "compacted_ids": list(self._compacted_order),
+            "n_compacted": self.n_compacted,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], *, where: str = "provenance") -> ProvenanceStore:
+        """Rebuild a store; checks that every stored belief equals its log's reconstruction (Eq. 5)."""
+        try:
+            prior = data["prior"]
+            store = cls((float(prior[0]), float(prior[1])))
+            all_entries: list[ProvenanceEntry] = []
+            for i, pair in enumerate(data["pairs"]):
+                node, predicate = pair["node"], pair["predicate"]
+                if not isinstance(predicate, str) or not predicate:
+                    raise FormatError(f"{where}.pairs[{i}].predicate must be a non-empty string")
+                log = store._pairs.setdefault((node, predicate), _PairLog(store.prior_alpha, store.prior_beta))
+                for j, raw in enumerate(pair["entries"]):
+                    eid, t, da, db, status, stance, corr, n_folded = raw
+                    st = _STATUS_BY_VALUE.get(status)
+                    if st is None:
+                        raise FormatError(f"{where}.pairs[{i}].entries[{j}]: unknown status {status!r}")
+                    if not (math.isfinite(da) and math.isfinite(db)):
+                        raise FormatError(f"{where}.pairs[{i}].entries[{j}]: increments must be finite")
+                    e = ProvenanceEntry(eid, int(t), float(da), float(db), st, node, predicate, int(stance))
+                    e.corroborated_by = list(corr) if corr else None
+                    e.n_folded = int(n_folded)
+                    log.entries.append(e)
+                    all_entries.append(e)
+                    if eid is not None:
+                        store._by_event.setdefault(eid, []).append(e)
+                store._refresh(log)
+                for name, stored, rebuilt in (("alpha", pair["alpha"], log.alpha), ("beta", pair["beta"], log.beta)):
+                    if not math.isclose(float(stored), rebuilt, rel_tol=1e-9, abs_tol=1e-9):
+                        raise FormatError(
+                            f"{where}.pairs[{i}] ({node!r}, {predicate!r}): stored {name}={stored!r} does not "
+                            f"equal prior + sum of logged increments ({rebuilt!r}); the file was edited or corrupted"
+                        )
+                if log.alpha <= 0 or log.beta <= 0:
+                    raise FormatError(f"{where}.pairs[{i}]: belief parameters must stay > 0")
+            all_entries.sort(key=lambda e: e.t)
+            for e in all_entries:
+                if e.status is not EntryStatus.COMPACTED:
+                    store._timeline.append(e)
+                if e.status in PENDING:
+                    store._add_pending((e.node, e.predicate), e)
+            for eid in data.get("compacted_ids", []):
+                store._remember_compacted(eid)
+            store.n_compacted = int(data.get("n_compacted", 0))
+        except FormatError:
+            raise
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise FormatError(f"{where}: malformed provenance data ({type(exc).__name__}: {exc})") from exc
+        return store
+
+    def iter_entries(self) -> Iterable[ProvenanceEntry]:
+        for log in self._pairs.values():
+            yield from log.entries
