@@ -1,0 +1,428 @@
+"""ConceptGraphsBackend: belief fusion behind ConceptGraphs' mapping functions."""
+
+from __future__ import annotations
+
+import contextlib
+from collections import Counter
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sgbelief.adapters.conceptgraphs.identity import IdentityMap
+from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
+
+#: detection-dict key a segmenter-running pipeline may set to the geometric label of that detection
+DEFAULT_LABEL_KEY = "geometric_label"
+
+DetectionLabelFn = Callable[[dict, Any, int], "str | None"]
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One per-detection claim read from a ConceptGraphs object dict."""
+
+    class_id: int | None
+    class_name: str
+    confidence: float
+    t: int
+
+
+class _EventChannel:
+    """Geometric channel for one event: the detection's own label first, then the configured channel."""
+
+    __slots__ = ("_label", "_detection", "_fallback", "_fn")
+
+    def __init__(self, label: str | None, detection: dict | None, fallback: Any, fn: DetectionLabelFn | None) -> None:
+        self._label = label
+        self._detection = detection
+        self._fallback = fallback
+        self._fn = fn
+
+    def label(self, node: Any, t: int) -> str | None:
+        if self._label is not None:
+            return self._label
+        if self._fn is not None and self._detection is not None:
+            value = self._fn(self._detection, node, t)
+            if value is not None:
+                return value
+        if self._fallback is not None:
+            return self._fallback.label(node, t)
+        return None
+
+
+class ConceptGraphsBackend:
+    """Routes every ConceptGraphs detection into a :class:`~sgbelief.graph.scene_graph.SceneGraph`.
+
+    Args:
+        operator: operator name (``comod``, ``cal``, ``majority``, ...) or a FusionOperator instance.
+        vocabulary: a :class:`ClassVocabulary`, a path to ``configs/conceptgraphs/*.yaml`` or None
+            (shipped ScanNet vocabulary).
+        context: the context tag kappa (detector / VLM and prompt version) of every event.
+        channel: optional geometric channel: a GeometricChannel (``label(node, t)``), or a callable
+            ``fn(detection, node, t) -> str | None``.  A detection's own ``label_key`` entry wins.
+        label_key: detection-dict key holding a per-detection geometric label (popped from the dict
+            before ConceptGraphs' merge sees it, since the original merges reject unknown keys).
+        unknown_label / unknown_class_id: label written when no predicate commits.
+        tau / tau_t: commit threshold and targeting-mass threshold (default: the operator config).
+        on_filter: ``"mark"`` (node kept with ``cg_filtered=True``) or ``"remove"``.
+        confidence_map: optional map of the detector's raw confidence before it enters an event.
+    """
+
+    def __init__(
+        self,
+        operator: str | Any = "comod",
+        vocabulary: ClassVocabulary | str | Path | None = None,
+        context: str = "conceptgraphs",
+        channel: Any = None,
+        *,
+        graph: Any = None,
+        operator_config: Any = None,
+        label_key: str = DEFAULT_LABEL_KEY,
+        unknown_label: str = "unknown",
+        unknown_class_id: int = -1,
+        tau: float | None = None,
+        tau_t: float | None = None,
+        on_filter: str = "mark",
+        confidence_map: Callable[[float], float] | None = None,
+        class_names: Sequence[str] | None = None,
+    ) -> None:
+        from sgbelief.fusion.channel import NullChannel
+        from sgbelief.graph.scene_graph import SceneGraph
+
+        if isinstance(vocabulary, ClassVocabulary):
+            self.vocabulary = vocabulary
+        elif vocabulary is None:
+            self.vocabulary = ClassVocabulary.default()
+        else:
+            self.vocabulary = ClassVocabulary.from_yaml(vocabulary)
+        self.table = self.vocabulary.table()
+        if isinstance(operator, str):
+            from sgbelief.fusion.registry import make_operator
+
+            self.operator = make_operator(operator, config=operator_config, vocabulary=self.table)
+            self.operator_name = operator
+        else:
+            self.operator = operator
+            self.operator_name = type(operator).__name__
+        cfg = getattr(self.operator, "config", None)
+        self.tau = float(tau if tau is not None else getattr(cfg, "tau", 0.5))
+        self.tau_t = float(tau_t if tau_t is not None else getattr(cfg, "tau_t", 0.1))
+        self.context = context
+        self.graph = graph if graph is not None else SceneGraph()
+        self._null = NullChannel()
+        self.channel_fn: DetectionLabelFn | None = None
+        self.channel: Any = None
+        if channel is not None:
+            if hasattr(channel, "label"):
+                self.channel = channel
+            elif callable(channel):
+                self.channel_fn = channel
+            else:
+                raise TypeError("channel must be a GeometricChannel (label(node, t)) or a callable")
+        self.label_key = label_key
+        self.unknown_label = unknown_label
+        self.unknown_class_id = unknown_class_id
+        if on_filter not in ("mark", "remove"):
+            raise ValueError("on_filter must be 'mark' or 'remove'")
+        self.on_filter = on_filter
+        self.confidence_map = confidence_map
+        self.identity = IdentityMap()
+        self.class_names: dict[int, str] = dict(enumerate(class_names)) if class_names else {}
+        self._names_per_node: dict[Any, Counter[tuple[int | None, str]]] = {}
+        self._detections_per_node: Counter[Any] = Counter()
+        self._routed_detections = 0
+        self._last_t = None
+        self._pending_targets: dict[int, dict[Any, float]] = {}
+        self._last_match: tuple[Any, Any, float] | None = None
+        self.reports: list[Any] = []
+        self.keep_reports = False
+        self._patcher: Any = None
+        self.active = True
+
+    # ------------------------------------------------------------------ reading CG dicts
+    def claims_of(self, obj: Mapping[str, Any]) -> list[Claim]:
+        """The per-detection (class, confidence, frame) history stored in a CG object dict."""
+        ids = list(obj.get("class_id") or [])
+        confs = list(obj.get("conf") or [])
+        frames = list(obj.get("image_idx") or [])
+        names = obj.get("class_name")
+        n = max(len(ids), len(confs))
+        out: list[Claim] = []
+        for k in range(n):
+            cid = _as_int(ids[k]) if k < len(ids) else None
+            if isinstance(names, list) and k < len(names):
+                name = str(names[k])
+            elif cid is not None and cid in self.class_names:
+                name = self.class_names[cid]
+            elif isinstance(names, str) and (n == 1 or not ids):
+                name = names
+            elif cid is not None:
+                name = str(cid)
+            else:
+                continue
+            if cid is not None and cid >= 0 and name != str(cid):
+                self.class_names.setdefault(cid, name)
+            conf = float(np.asarray(confs[k]).item()) if k < len(confs) and confs[k] is not None else 1.0
+            t = _as_int(frames[k]) if k < len(frames) else 0
+            out.append(Claim(cid, name, min(max(conf, 0.0), 1.0), t if t is not None else 0))
+        return out
+
+    # ------------------------------------------------------------------ identity
+    def node_of(self, obj: Mapping[str, Any]) -> Any | None:
+        """The graph node standing for a map object (None for a detection never added to the map)."""
+        node = self.identity.lookup(obj)  # type: ignore[arg-type]
+        if node is None:
+            return None
+        return self.identity.resolve(node)
+
+    def ensure_node(self, obj: dict) -> Any:
+        """Node of map object ``obj``, registering it (and replaying its history) on first sight."""
+        node = self.identity.lookup(obj)
+        if node is not None:
+            if self.identity.is_absorbed(node):
+                return self.identity.resolve(node)
+            if node in self.graph:
+                return node
+        node = self.identity.register(obj)
+        self._add_graph_node(node, obj)
+        self.route_detection(obj, {node: 1.0})
+        return node
+
+    def _add_graph_node(self, node: Any, obj: Mapping[str, Any]) -> None:
+        centroid, bbox = _geometry_summary(obj)
+        if node in self.graph:
+            return
+        self.graph.add_node(node, centroid=centroid, bbox=bbox, source="conceptgraphs")
+
+    # ------------------------------------------------------------------ evidence
+    def route_detection(self, det: dict, targets: Mapping[Any, float]) -> int:
+        """Turn every per-detection claim of ``det`` into an EvidenceEvent on ``targets``.
+
+        Returns the number of events emitted.  Targets with mass <= tau_T are discarded; the
+        detection's own geometric label (``label_key``) is consumed and removed from the dict.
+        """
+        from sgbelief.fusion.events import EvidenceEvent
+
+        geo = det.pop(self.label_key, None) if isinstance(det, dict) else None
+        targets = {n: float(m) for n, m in targets.items() if float(m) > self.tau_t}
+        claims = self.claims_of(det)
+        n_events = 0
+        geo_labels = geo if isinstance(geo, list) else [geo] * len(claims)
+        for k, claim in enumerate(claims):
+            for node in targets:
+                counts = self._names_per_node.setdefault(node, Counter())
+                counts[(claim.class_id, claim.class_name)] += 1
+            pred = self.vocabulary.predicate(claim.class_name)
+            if pred is None or not targets:
+                continue
+            conf = self.confidence_map(claim.confidence) if self.confidence_map else claim.confidence
+            label = geo_labels[k] if k < len(geo_labels) else None
+            if self.table is not None and pred not in self.table:
+                channel: Any = self._null  # no verification possible for this predicate
+            else:
+                channel = _EventChannel(label, det, self.channel, self.channel_fn)
+            if self._last_t is not None and claim.t > self._last_t:
+                self.operator.tick(self.graph, claim.t)
+            self._last_t = claim.t if self._last_t is None else max(self._last_t, claim.t)
+            event = EvidenceEvent(targets=targets, predicate=pred, confidence=float(conf),
+                                  context=self.context, t=int(claim.t))
+            report = self.operator.update(self.graph, event, channel)
+            if self.keep_reports:
+                self.reports.append(report)
+            n_events += 1
+        for node in targets:
+            self._detections_per_node[node] += len(claims)
+        self._routed_detections += len(claims)
+        return n_events
+
+    def targets_for(self, row: Any, best: int, objects: Sequence[dict], threshold: float) -> dict[Any, float]:
+        """Targeting distribution T for one detection from its row of association scores.
+
+        Every object whose score is above ``threshold`` (finite scores when it is -inf) is a
+        candidate; T(v) is proportional to max(score, 0) over the candidates, and the argmax
+        alone gets mass 1 when no candidate has a positive score.  The caller drops T(v) <= tau_T.
+        """
+        scores = np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float).ravel()
+        cand = [j for j, s in enumerate(scores) if np.isfinite(s) and s > threshold and j < len(objects)]
+        pos = {j: scores[j] for j in cand if scores[j] > 0}
+        if len(pos) <= 1 or best not in pos:
+            return {self.ensure_node(objects[best]): 1.0}
+        total = sum(pos.values())
+        out: dict[Any, float] = {}
+        for j, s in pos.items():
+            node = self.ensure_node(objects[j])
+            out[node] = out.get(node, 0.0) + s / total
+        return out
+
+    def migrate(self, keep_obj: dict, absorb_obj: dict) -> None:
+        """``absorb_obj`` (a map object or a fresh detection) is being merged into ``keep_obj``."""
+        keep = self.ensure_node(keep_obj)
+        raw = self.identity.lookup(absorb_obj)
+        if raw is None:
+            # a detection (or an object never seen): its claims are new evidence for `keep`
+            self.route_detection(absorb_obj, {keep: 1.0})
+            return
+        if self.identity.is_absorbed(raw):
+            return  # already merged away once: its evidence lives elsewhere, count it once
+        if raw not in self.graph:
+            self.route_detection(absorb_obj, {keep: 1.0})
+            return
+        if raw == keep:
+            return
+        self.graph.merge_nodes(keep, raw)
+        self._detections_per_node[keep] += self._detections_per_node.pop(raw, 0)
+        names = self._names_per_node.setdefault(keep, Counter())
+        names.update(self._names_per_node.pop(raw, Counter()))
+        self.identity.absorb(raw, keep)
+
+    def refresh_geometry(self, obj: Mapping[str, Any]) -> None:
+        """Copy the object's current centroid / box into its node."""
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return
+        centroid, bbox = _geometry_summary(obj)
+        attrs = self.graph.nx.nodes[node]
+        if centroid is not None:
+            attrs["centroid"] = centroid
+        if bbox is not None:
+            attrs["bbox"] = bbox
+
+    def mark_filtered(self, obj: Mapping[str, Any]) -> None:
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return
+        if self.on_filter == "remove":
+            self.graph.remove_node(node)
+        else:
+            self.graph.nx.nodes[node]["cg_filtered"] = True
+        self.identity.retire(node)
+
+    # ------------------------------------------------------------------ labels out
+    def beliefs(self, obj: Mapping[str, Any]) -> dict[str, Any]:
+        """{predicate: BetaBelief} of a map object (empty for an object the backend never saw)."""
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return {}
+        return dict(self.graph.beliefs(node))
+
+    def probability(self, obj: Mapping[str, Any], predicate: str) -> float:
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return 0.5
+        return float(self.operator.probability(self.graph, node, predicate))
+
+    def committed_predicate(self, node: Any) -> str | None:
+        """The predicate with the highest committed probability (> tau), or None."""
+        best, best_p = None, self.tau
+        preds = set(self.graph.beliefs(node))
+        for counts_key in self._names_per_node.get(node, ()):
+            p = self.vocabulary.predicate(counts_key[1])
+            if p is not None:
+                preds.add(p)
+        for pred in sorted(preds):
+            p = float(self.operator.probability(self.graph, node, pred))
+            if p > best_p:
+                best, best_p = pred, p
+        return best
+
+    def _class_for(self, node: Any, pred: str | None) -> tuple[int | None, str] | None:
+        if pred is None:
+            return None
+        counts = self._names_per_node.get(node, Counter())
+        ranked = [(n, key) for key, n in counts.items() if self.vocabulary.predicate(key[1]) == pred]
+        if not ranked:
+            return None
+        ranked.sort(key=lambda x: -x[0])  # stable: ties keep first-seen order
+        return ranked[0][1]
+
+    def label_of(self, obj: Mapping[str, Any]) -> str | None:
+        """Class name from the beliefs (``unknown_label`` when nothing commits; None if unseen)."""
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return None
+        hit = self._class_for(node, self.committed_predicate(node))
+        return self.unknown_label if hit is None else hit[1]
+
+    def class_id_of(self, obj: Mapping[str, Any]) -> int | None:
+        """Class id from the beliefs (``unknown_class_id`` when nothing commits; None if unseen)."""
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return None
+        hit = self._class_for(node, self.committed_predicate(node))
+        if hit is None or hit[0] is None:
+            return self.unknown_class_id
+        return hit[0]
+
+    def evidence_count(self) -> int:
+        return int(self.graph.evidence_count())
+
+    @property
+    def routed_detections(self) -> int:
+        """Per-detection claims routed so far (each detection counted once)."""
+        return self._routed_detections
+
+    # ------------------------------------------------------------------ functions & patching
+    def functions(self, generation: str = "main") -> Any:
+        """ConceptGraphs-signature functions for ``generation`` (``main`` or ``ali-dev``)."""
+        from sgbelief.adapters.conceptgraphs.functions import make_functions
+
+        return make_functions(self, generation)
+
+    def install(self, *modules: Any, generation: str | None = None, fix_list_kwargs: bool = True) -> None:
+        """Swap the belief-routing functions into ConceptGraphs' (already imported) modules."""
+        from sgbelief.adapters.conceptgraphs.patching import Patcher
+
+        if self._patcher is not None:
+            raise RuntimeError("backend already installed; call uninstall() first")
+        patcher = Patcher(self, extra_modules=modules, generation=generation, fix_list_kwargs=fix_list_kwargs)
+        patcher.install()
+        self._patcher = patcher
+        self.active = True
+
+    def uninstall(self) -> None:
+        """Restore every name swapped by :meth:`install`."""
+        if self._patcher is not None:
+            self._patcher.uninstall()
+            self._patcher = None
+
+    @contextlib.contextmanager
+    def patch(self, *modules: Any, generation: str | None = None, fix_list_kwargs: bool = True) -> Iterator[ConceptGraphsBackend]:
+        """Context manager form of :meth:`install` / :meth:`uninstall`."""
+        self.install(*modules, generation=generation, fix_list_kwargs=fix_list_kwargs)
+        try:
+            yield self
+        finally:
+            self.uninstall()
+
+    @property
+    def generation(self) -> str | None:
+        return None if self._patcher is None else self._patcher.generation
+
+    def save(self, path: str | Path) -> Path:
+        """Save the belief graph (SceneGraph JSON)."""
+        return self.graph.save(path)
+
+
+def _as_int(value: Any) -> int | None:
+    try:
+        return int(np.asarray(value).item())
+    except (TypeError, ValueError):
+        return None
+
+
+def _geometry_summary(obj: Mapping[str, Any]) -> tuple[Any, Any]:
+    pts = None
+    pcd = obj.get("pcd")
+    if pcd is not None and hasattr(pcd, "points"):
+        pts = np.asarray(pcd.points)
+    elif obj.get("pcd_np") is not None:
+        pts = np.asarray(obj["pcd_np"])
+    if pts is None or pts.size == 0:
+        return None, None
+    pts = pts.reshape(-1, 3)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    centroid = tuple(float(x) for x in pts.mean(axis=0))
+    return centroid, (tuple(float(x) for x in lo), tuple(float(x) for x in hi))

@@ -1,0 +1,124 @@
+"""Stable identities for ConceptGraphs map objects, kept *outside* the object dicts.
+
+ConceptGraphs' merge rejects keys it does not know (``main`` raises NotImplementedError on any
+non-list/int value and *sums* ints, ``ali-dev`` raises ValueError on any unknown key), so no uuid or
+belief can live in the dict.  Plain ``dict`` objects cannot be weak-referenced either, so the map is:
+
+1. ``obj['id']`` when present (``ali-dev`` puts a ``uuid.UUID`` on every detection): node ``str(id)``;
+2. otherwise an identity table ``id(obj) -> (obj, node)`` holding a strong reference, so the
+   ``id()`` cannot be recycled while the entry lives (entries are dropped when a node is retired);
+3. a fingerprint fallback, the object's first detection ``(image_idx[0], mask_idx[0])``, which a
+   merge never changes (lists are only extended) and which survives ``copy.deepcopy`` (as done by
+   ``to_serializable``, ``prepare_objects_save_vis`` and the visualisation copies).
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+Fingerprint = tuple[Any, ...]
+
+
+def fingerprint(obj: dict) -> Fingerprint | None:
+    """Identity of the first detection of ``obj`` (None when the keys are missing or empty)."""
+    try:
+        img, msk = obj["image_idx"], obj["mask_idx"]
+        first = (_plain(img[0]), _plain(msk[0]))
+    except (KeyError, IndexError, TypeError):
+        return None
+    path = obj.get("color_path")
+    if isinstance(path, list) and path:
+        first = first + (str(path[0]),)
+    return first
+
+
+def _plain(value: Any) -> Any:
+    try:
+        return value.item()  # numpy / torch scalars
+    except AttributeError:
+        return value
+
+
+class IdentityMap:
+    """Object dict -> graph node id, with tombstones for nodes merged away."""
+
+    def __init__(self, prefix: str = "cg") -> None:
+        self._prefix = prefix
+        self._counter = itertools.count()
+        self._by_id: dict[int, tuple[dict, str]] = {}
+        self._by_fp: dict[Fingerprint, str] = {}
+        self._absorbed: dict[str, str] = {}  # absorbed node -> node that absorbed it
+
+    def lookup(self, obj: dict) -> str | None:
+        """Node registered for ``obj`` (resolving tombstones is left to :meth:`resolve`)."""
+        uid = obj.get("id") if isinstance(obj, dict) else None
+        if uid is not None and not isinstance(uid, (bool, int, float)):
+            node = str(uid)
+            return node if node in self._known else None
+        entry = self._by_id.get(id(obj))
+        if entry is not None and entry[0] is obj:
+            return entry[1]
+        fp = fingerprint(obj)
+        if fp is not None:
+            return self._by_fp.get(fp)
+        return None
+
+    def register(self, obj: dict) -> str:
+        """Give ``obj`` a new node id and remember it."""
+        uid = obj.get("id")
+        if uid is not None and not isinstance(uid, (bool, int, float)):
+            node = str(uid)
+        else:
+            node = f"{self._prefix}-{next(self._counter)}"
+            while node in self._known:
+                node = f"{self._prefix}-{next(self._counter)}"
+        self._known.add(node)
+        self._by_id[id(obj)] = (obj, node)
+        fp = fingerprint(obj)
+        if fp is not None:
+            self._by_fp.setdefault(fp, node)
+        return node
+
+    def rebind(self, obj: dict, node: str) -> None:
+        """Remember that ``obj`` (e.g. a replacement dict) stands for ``node``."""
+        self._known.add(node)
+        self._by_id[id(obj)] = (obj, node)
+        fp = fingerprint(obj)
+        if fp is not None:
+            self._by_fp.setdefault(fp, node)
+
+    def absorb(self, absorbed: str, keep: str) -> None:
+        """Record that ``absorbed`` was merged into ``keep``."""
+        self._absorbed[absorbed] = keep
+        self._drop_strong_refs(absorbed, keep_tombstone=True)
+
+    def retire(self, node: str) -> None:
+        """Forget the strong references to objects of ``node`` (filtered objects)."""
+        self._drop_strong_refs(node, keep_tombstone=True)
+
+    def resolve(self, node: str) -> str:
+        """Follow absorption tombstones to the node that holds the evidence now."""
+        seen = set()
+        while node in self._absorbed and node not in seen:
+            seen.add(node)
+            node = self._absorbed[node]
+        return node
+
+    def is_absorbed(self, node: str) -> bool:
+        return node in self._absorbed
+
+    @property
+    def _known(self) -> set[str]:
+        known = self.__dict__.get("_known_set")
+        if known is None:
+            known = self.__dict__["_known_set"] = set()
+        return known
+
+    def _drop_strong_refs(self, node: str, *, keep_tombstone: bool) -> None:
+        for key in [k for k, (_o, n) in self._by_id.items() if n == node]:
+            obj = self._by_id.pop(key)[0]
+            # keep a fingerprint tombstone so a later look-up of a stale copy still finds the node
+            fp = fingerprint(obj)
+            if keep_tombstone and fp is not None:
+                self._by_fp.setdefault(fp, node)

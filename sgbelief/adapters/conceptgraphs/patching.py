@@ -1,0 +1,169 @@
+"""Swap the backend's functions into already-imported ConceptGraphs modules, and back."""
+
+from __future__ import annotations
+
+import inspect
+import sys
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # pragma: no cover
+    from sgbelief.adapters.conceptgraphs.backend import ConceptGraphsBackend
+
+#: ConceptGraphs names the backend replaces, and the module that defines each one
+PATCHED_NAMES: dict[str, str] = {
+    "merge_obj2_into_obj1": "conceptgraph.slam.utils",
+    "merge_overlap_objects": "conceptgraph.slam.utils",
+    "merge_objects": "conceptgraph.slam.utils",
+    "filter_objects": "conceptgraph.slam.utils",
+    "merge_detections_to_objects": "conceptgraph.slam.mapping",
+    "match_detections_to_objects": "conceptgraph.slam.mapping",
+    "merge_obj_matches": "conceptgraph.slam.mapping",
+}
+#: helpers the replacements call through to when present (never patched)
+HELPERS: dict[str, str] = {
+    "compute_overlap_matrix": "conceptgraph.slam.utils",
+    "compute_overlap_matrix_general": "conceptgraph.slam.utils",
+    "tracker": "conceptgraph.slam.mapping",
+}
+CORE_MODULES = ("conceptgraph.slam.utils", "conceptgraph.slam.mapping", "conceptgraph.slam.slam_classes")
+
+
+def _kwarg_tolerant(cls: type) -> type:
+    """A subclass of a ConceptGraphs list class whose constructor ignores keyword arguments."""
+
+    def __init__(self: Any, *args: Any, **_kwargs: Any) -> None:
+        cls.__init__(self, *args)
+
+    def __new__(klass: type, *args: Any, **_kwargs: Any) -> Any:
+        return list.__new__(klass)
+
+    return type(cls.__name__, (cls,), {"__init__": __init__, "__new__": __new__, "__module__": cls.__module__,
+                                       "__qualname__": cls.__qualname__, "_sgbelief_kwarg_tolerant": True})
+
+
+class Patcher:
+    """Records every (namespace, name, old value) it changes so :meth:`uninstall` restores them."""
+
+    def __init__(self, backend: ConceptGraphsBackend, *, extra_modules: tuple[Any, ...] = (),
+                 generation: str | None = None, fix_list_kwargs: bool = True) -> None:
+        self.backend = backend
+        self.extra = [sys.modules[m] if isinstance(m, str) else m for m in extra_modules]
+        self.fix_list_kwargs = fix_list_kwargs
+        self.originals: dict[str, Any] = {}
+        self._helpers: dict[str, Any] = {}
+        self._records: list[tuple[Any, str, Any, bool]] = []  # (namespace, name, old, existed)
+        self.generation = generation
+
+    def _module(self, name: str) -> ModuleType | None:
+        mod = sys.modules.get(name)
+        if mod is not None:
+            return mod
+        short = name.rsplit(".", 1)[-1]
+        for extra in self.extra:
+            if getattr(extra, "__name__", "").endswith(short):
+                return extra
+        return None
+
+    def helper(self, name: str) -> Any:
+        return self._helpers.get(name)
+
+    def install(self) -> None:
+        for name, modname in PATCHED_NAMES.items():
+            mod = self._module(modname)
+            value = getattr(mod, name, None) if mod is not None else None
+            if value is None:
+                for extra in self.extra:
+                    value = extra.__dict__.get(name)
+                    if value is not None:
+                        break
+            if value is not None and not getattr(value, "_sgbelief_replacement", False):
+                self.originals[name] = value
+        for name, modname in HELPERS.items():
+            mod = self._module(modname)
+            if mod is not None and name in mod.__dict__:
+                self._helpers[name] = mod.__dict__[name]
+        if self.generation is None:
+            self.generation = self._detect_generation()
+        funcs = self.backend.functions(self.generation)
+        replacements = {name: getattr(funcs, name) for name in PATCHED_NAMES if hasattr(funcs, name)}
+        for fn in replacements.values():
+            fn._sgbelief_replacement = True
+        # every namespace that bound an original (conceptgraph.* modules, run scripts, __main__)
+        targets = list(self.extra)
+        for modname, mod in list(sys.modules.items()):
+            if mod is None or mod in targets:
+                continue
+            if modname.startswith("conceptgraph") or modname == "__main__":
+                targets.append(mod)
+            else:
+                d = getattr(mod, "__dict__", None)
+                if isinstance(d, dict) and any(d.get(n) is o for n, o in self.originals.items()):
+                    targets.append(mod)
+        for mod in targets:
+            d = mod.__dict__
+            for name, new in replacements.items():
+                old = d.get(name)
+                if old is not None and (old is self.originals.get(name)):
+                    self._set(mod, name, new)
+        # labels out: DetectionList.get_most_common_class (MapObjectList inherits it)
+        classes = self._list_classes(targets)
+        for cls in classes.get("DetectionList", []):
+            if "get_most_common_class" in cls.__dict__:
+                self._set(cls, "get_most_common_class", funcs.get_most_common_class)
+        if self.fix_list_kwargs:
+            for cname, found in classes.items():
+                for cls in found:
+                    if getattr(cls, "_sgbelief_kwarg_tolerant", False) or not _rejects_kwargs(cls):
+                        continue
+                    tolerant = _kwarg_tolerant(cls)
+                    for mod in targets:
+                        if mod.__dict__.get(cname) is cls:
+                            self._set(mod, cname, tolerant)
+
+    def _list_classes(self, targets: list[Any]) -> dict[str, list[type]]:
+        out: dict[str, list[type]] = {"DetectionList": [], "MapObjectList": []}
+        for mod in targets:
+            for cname in out:
+                cls = mod.__dict__.get(cname)
+                if isinstance(cls, type) and issubclass(cls, list) and cls not in out[cname]:
+                    out[cname].append(cls)
+        return out
+
+    def _detect_generation(self) -> str:
+        orig = self.originals.get("merge_obj2_into_obj1")
+        if orig is None:
+            return "main"
+        try:
+            params = list(inspect.signature(orig).parameters)
+        except (TypeError, ValueError):
+            return "main"
+        return "main" if params and params[0] == "cfg" else "ali-dev"
+
+    def _set(self, namespace: Any, name: str, value: Any) -> None:
+        existed = name in namespace.__dict__
+        self._records.append((namespace, name, namespace.__dict__.get(name), existed))
+        setattr(namespace, name, value)
+
+    def uninstall(self) -> None:
+        while self._records:
+            namespace, name, old, existed = self._records.pop()
+            if existed:
+                setattr(namespace, name, old)
+            else:
+                try:
+                    delattr(namespace, name)
+                except AttributeError:
+                    pass
+        self.originals.clear()
+        self._helpers.clear()
+
+
+def _rejects_kwargs(cls: type) -> bool:
+    try:
+        cls(device="cpu")
+    except TypeError:
+        return True
+    except Exception:  # noqa: BLE001
+        return False
+    return False

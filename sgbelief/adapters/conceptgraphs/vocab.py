@@ -1,0 +1,129 @@
+"""ConceptGraphs class names -> sgbelief predicates (configs/conceptgraphs/*.yaml)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sgbelief.errors import ConfigError
+
+_NON_WORD = re.compile(r"[^0-9a-z]+")
+
+
+def normalise_class_name(name: str) -> str:
+    """Lower-case, fold every run of non-alphanumerics into one ``_``: ``"Office chair" -> "office_chair"``."""
+    return _NON_WORD.sub("_", str(name).strip().lower()).strip("_")
+
+
+class ClassVocabulary:
+    """Maps a detector class name to the predicate it asserts.
+
+    Lookup order: explicit ``classes`` overrides, then aliases of the subsumption table,
+    then ``is_<normalised name>``.  Names in ``ignore`` map to ``None`` (no evidence routed).
+    """
+
+    def __init__(
+        self,
+        classes: Mapping[str, str] | None = None,
+        *,
+        aliases: Mapping[str, str] | None = None,
+        ignore: Iterable[str] = (),
+        subsumption_path: Path | None = None,
+        table: Any = None,
+    ) -> None:
+        self._map: dict[str, str] = {}
+        for name, pred in (aliases or {}).items():
+            self._map[normalise_class_name(name)] = pred
+        for name, pred in (classes or {}).items():
+            self._map[normalise_class_name(name)] = pred
+        self._ignore = {normalise_class_name(n) for n in ignore}
+        self.subsumption_path = subsumption_path
+        self._table = table
+
+    # ---- construction -------------------------------------------------------------------
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> ClassVocabulary:
+        """Load a ``configs/conceptgraphs/*.yaml`` file (or a bare ``configs/vocab/*.yaml`` table)."""
+        from sgbelief.resources import config_dir
+
+        path = Path(path)
+        if not path.exists():
+            candidate = config_dir() / "conceptgraphs" / f"{path.name if path.suffix else path.name + '.yaml'}"
+            if candidate.exists():
+                path = candidate
+            else:
+                raise FileNotFoundError(f"ConceptGraphs vocabulary {str(path)!r} not found")
+        try:
+            data = yaml.safe_load(path.read_text()) or {}
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{path}: invalid YAML: {exc}") from exc
+        if not isinstance(data, dict):
+            raise ConfigError(f"{path}: top level must be a mapping")
+        if data.get("format") == "sgbelief.vocabulary":  # a subsumption table used directly
+            return cls(aliases=_aliases_of(data, path), subsumption_path=path)
+        if data.get("format") not in (None, "sgbelief.cg_vocabulary"):
+            raise ConfigError(f"{path}: key 'format': expected 'sgbelief.cg_vocabulary', got {data.get('format')!r}")
+        classes = data.get("classes") or {}
+        if not isinstance(classes, dict) or not all(isinstance(v, str) for v in classes.values()):
+            raise ConfigError(f"{path}: key 'classes': expected a mapping class name -> predicate")
+        ignore = data.get("ignore") or []
+        if not isinstance(ignore, list):
+            raise ConfigError(f"{path}: key 'ignore': expected a list of class names")
+        aliases: dict[str, str] = {}
+        sub_path: Path | None = None
+        sub = data.get("subsumption")
+        if sub is not None:
+            sub_path = Path(sub)
+            if not sub_path.is_absolute():
+                local = path.parent / sub_path
+                sub_path = local if local.exists() else config_dir() / sub_path
+            if not sub_path.exists():
+                raise ConfigError(f"{path}: key 'subsumption': file {str(sub)!r} not found")
+            sub_data = yaml.safe_load(sub_path.read_text()) or {}
+            aliases = _aliases_of(sub_data, sub_path)
+        return cls(classes, aliases=aliases, ignore=ignore, subsumption_path=sub_path)
+
+    @classmethod
+    def default(cls) -> ClassVocabulary:
+        """The shipped ScanNet vocabulary (``configs/conceptgraphs/scannet.yaml``)."""
+        from sgbelief.resources import config_path
+
+        return cls.from_yaml(config_path("conceptgraphs", "scannet.yaml"))
+
+    # ---- lookup ------------------------------------------------------------------------
+    def predicate(self, class_name: str) -> str | None:
+        """Predicate asserted by a detection of ``class_name``; None for ignored classes."""
+        key = normalise_class_name(class_name)
+        if key in self._ignore:
+            return None
+        pred = self._map.get(key)
+        if pred is None and key.endswith("s") and key[:-1] in self._map:  # plural detector prompts
+            pred = self._map[key[:-1]]
+        return pred if pred is not None else f"is_{key}"
+
+    def known_predicates(self) -> set[str]:
+        """Predicates named explicitly by the vocabulary (aliases and overrides)."""
+        return set(self._map.values())
+
+    def table(self) -> Any:
+        """The subsumption table (``SubsumptionTable``) for the geometric channel, or None."""
+        if self._table is None and self.subsumption_path is not None:
+            from sgbelief.fusion.compatibility import SubsumptionTable
+
+            self._table = SubsumptionTable.from_yaml(self.subsumption_path)
+        return self._table
+
+
+def _aliases_of(data: Any, path: Path) -> dict[str, str]:
+    preds = data.get("predicates") if isinstance(data, dict) else None
+    if not isinstance(preds, dict):
+        raise ConfigError(f"{path}: key 'predicates': expected a mapping")
+    out: dict[str, str] = {}
+    for pred, spec in preds.items():
+        for alias in (spec or {}).get("aliases", []) or []:
+            out[str(alias)] = str(pred)
+    return out
