@@ -575,6 +575,8 @@ class ProvenanceStore:
                         )
                 if log.alpha <= 0 or log.beta <= 0:
                     raise FormatError(f"{where}.pairs[{i}]: belief parameters must stay > 0")
+                # keep the stored running values bit-for-bit (they agree with the log to 1e-9)
+                log.alpha, log.beta = float(pair["alpha"]), float(pair["beta"])
             all_entries.sort(key=lambda e: e.t)
             for e in all_entries:
                 if e.status is not EntryStatus.COMPACTED:

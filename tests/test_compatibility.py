@@ -1,0 +1,82 @@
+"""Subsumption tables, verdicts with the c < 0.5 sign flip, YAML errors, shipped vocabularies."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from sgbelief.errors import ConfigError, FormatError, UnknownPredicateError
+from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
+from sgbelief.resources import config_path
+
+
+@pytest.fixture
+def table() -> SubsumptionTable:
+    return SubsumptionTable.shipped("kitti360")
+
+
+def test_verdicts_and_sign_flip(table: SubsumptionTable) -> None:
+    assert table.verdict("is_car", "truck", 0.9) is Verdict.CORROBORATES
+    assert table.verdict("is_pedestrian", "car", 0.9) is Verdict.CONTRADICTS
+    assert table.verdict("is_pedestrian", "car", 0.2) is Verdict.CORROBORATES  # "not a pedestrian" on a car
+    assert table.verdict("is_car", "car", 0.3) is Verdict.CONTRADICTS
+    assert table.verdict("is_car", "caravan", 0.9) is Verdict.NO_CLAIM  # ambiguous: in neither set
+    assert table.verdict("is_car", None, 0.9) is Verdict.NO_CLAIM
+    assert table.verdict("is_unknown", "car", 0.9) is Verdict.NO_CLAIM
+
+
+def test_outcome_ignores_claim_side(table: SubsumptionTable) -> None:
+    assert table.outcome("is_car", "bus") == 1
+    assert table.outcome("is_car", "person") == 0
+    assert table.outcome("is_car", "caravan") is None
+
+
+def test_aliases(table: SubsumptionTable) -> None:
+    assert table.predicate_for_class("Pickup Truck") == "is_car"
+    assert table.predicate_for_class("stop sign") == "is_traffic_sign"
+    assert table.predicate_for_class("unicorn") is None
+    with pytest.raises(UnknownPredicateError, match="is_car"):
+        table.require("is_carr")
+
+
+@pytest.mark.parametrize("name", ["scannet", "kitti360"])
+def test_shipped_vocabularies_are_explicit(name: str) -> None:
+    raw = yaml.safe_load(config_path("vocab", f"{name}.yaml").read_text())
+    labels = set(raw["labels"])
+    for pred, spec in raw["predicates"].items():
+        pos, neg = set(spec["positive"]), set(spec["negative"])
+        assert pos and neg, f"{pred}: both sets must be listed explicitly"
+        assert not pos & neg
+        assert pos | neg <= labels
+        # explicit, not "everything else": some labels stay undecided for every predicate
+        assert labels - pos - neg, f"{pred}: negative set covers every other label"
+    t = SubsumptionTable.from_yaml(config_path("vocab", f"{name}.yaml"))
+    assert len(t.predicates) >= 8
+
+
+def test_scannet_has_required_predicates() -> None:
+    t = SubsumptionTable.shipped("scannet")
+    for p in ["is_chair", "is_bookshelf", "is_table_or_desk", "is_sofa", "is_bed", "is_cabinet", "is_window", "is_door"]:
+        assert p in t
+    k = SubsumptionTable.shipped("kitti360")
+    assert {"car", "truck", "bus"} <= set(k.specs["is_car"].positive)
+
+
+def test_malformed_yaml_names_the_line(tmp_path: Path) -> None:
+    p = tmp_path / "v.yaml"
+    p.write_text("predicates:\n  is_chair:\n    positive: [chair\n    negative: [table]\n")
+    with pytest.raises(FormatError) as info:
+        SubsumptionTable.from_yaml(p)
+    assert "v.yaml" in str(info.value) and info.value.line is not None
+
+
+def test_invalid_vocabulary_names_the_key(tmp_path: Path) -> None:
+    p = tmp_path / "v.yaml"
+    p.write_text("predicates:\n  is_chair:\n    positive: [chair]\n    negative: [chair]\n")
+    with pytest.raises(ConfigError, match="is_chair"):
+        SubsumptionTable.from_yaml(p)
+    p.write_text("predicates:\n  is_chair:\n    positiv: [chair]\n")
+    with pytest.raises(ConfigError, match="positiv"):
+        SubsumptionTable.from_yaml(p)

@@ -1,0 +1,133 @@
+"""ProvenanceStore invariants: Eq. 5 reconstruction, exact retraction, compaction, cascades."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sgbelief.errors import RetractionError
+from sgbelief.graph.provenance import COUNTED, EntryStatus, ProvenanceStore
+
+NODES = ["a", "b", 7]
+PREDS = ["is_car", "is_chair"]
+increment = st.floats(min_value=0.0, max_value=3.0, allow_nan=False)
+record = st.tuples(st.sampled_from(NODES), st.sampled_from(PREDS), increment, increment,
+                   st.sampled_from([EntryStatus.COMMITTED, EntryStatus.REFUSED, EntryStatus.QUARANTINED]))
+
+
+def _build(records, skip=None):
+    store = ProvenanceStore()
+    for i, (node, pred, da, db, status) in enumerate(records):
+        if i == skip:
+            continue
+        store.record(node, pred, f"e{i}", i, da, db, status)
+    return store
+
+
+def _close(x: tuple[float, float], y: tuple[float, float]) -> bool:
+    return all(math.isclose(p, q, rel_tol=1e-12, abs_tol=1e-12) for p, q in zip(x, y))
+
+
+@given(st.lists(record, max_size=60))
+def test_reconstruction_equals_stored_belief(records) -> None:
+    store = _build(records)
+    for node, pred in store.pairs():
+        assert _close(store.alpha_beta(node, pred), store.reconstruct(node, pred))
+        a, b = store.alpha_beta(node, pred)
+        assert a >= 1.0 and b >= 1.0 and math.isfinite(a) and math.isfinite(b)
+
+
+@given(st.lists(record, min_size=1, max_size=60), st.data())
+def test_retraction_restores_the_stream_without_the_event(records, data) -> None:
+    i = data.draw(st.integers(0, len(records) - 1))
+    store = _build(records)
+    store.retract(f"e{i}")
+    ref = _build(records, skip=i)
+    for node in NODES:
+        for pred in PREDS:
+            assert _close(store.alpha_beta(node, pred), ref.alpha_beta(node, pred))
+    assert len(store.quarantine) >= 0 and not store.has_event(f"e{i}")
+    with pytest.raises(RetractionError, match="unknown event"):
+        store.retract(f"e{i}")
+
+
+@given(st.lists(record, max_size=80), st.integers(0, 80))
+def test_compaction_preserves_beliefs_and_refuses_retraction(records, horizon) -> None:
+    store = _build(records)
+    before = {k: store.alpha_beta(*k) for k in store.pairs()}
+    n_before = store.count_entries()
+    store.compact(horizon)
+    for k, ab in before.items():
+        assert _close(store.alpha_beta(*k), ab)
+        assert _close(store.alpha_beta(*k), store.reconstruct(*k))
+    assert store.count_entries() == n_before  # compacted entries still count what they folded
+    for i, rec in enumerate(records):
+        if i < horizon and rec[4] not in (EntryStatus.REFUSED, EntryStatus.QUARANTINED):
+            with pytest.raises(RetractionError, match="compacted"):
+                store.retract(f"e{i}")
+            break
+
+
+def test_pending_entries_are_not_counted_until_transition() -> None:
+    s = ProvenanceStore()
+    q = s.record("v", "is_car", "r", 0, 2.0, 0.5, EntryStatus.QUARANTINED, stance=1)
+    assert s.alpha_beta("v", "is_car") == (1.0, 1.0)
+    assert list(s.quarantine) == [q] and s.pending("v", "is_car") == [q]
+    s.transition(q, EntryStatus.RELEASED, scale=0.25)
+    assert s.alpha_beta("v", "is_car") == pytest.approx((1.5, 1.125))
+    assert s.pending("v", "is_car") == []
+    assert q.status in COUNTED
+
+
+def test_retracting_a_corroborated_revision_cascades() -> None:
+    s = ProvenanceStore()
+    s.record("v", "p", "base", 0, 1.0, 0.0)
+    r = s.record("v", "p", "rev", 1, 3.0, 0.0, EntryStatus.QUARANTINED, stance=1)
+    s.record("v", "p", "cor", 2, 0.8, 0.2)
+    s.transition(r, EntryStatus.COMMITTED)
+    r.corroborated_by = ["cor"]
+    s.record("v", "p", "late", 50, 0.1, 0.9)
+    r.corroborated_by.append("late")  # outside the T_cor window: not part of the cascade
+    assert s.retract("rev", cascade_window=10) == ["rev", "cor"]
+    assert s.alpha_beta("v", "p") == pytest.approx((2.1, 1.9))
+    assert s.has_event("late")
+
+
+def test_failed_cascade_changes_nothing() -> None:
+    s = ProvenanceStore()
+    s.record("v", "p", "cor", 1, 0.5, 0.5)
+    r = s.record("v", "p", "rev", 5, 3.0, 0.0, EntryStatus.COMMITTED, stance=1)
+    r.corroborated_by = ["cor"]
+    s.compact(2)  # folds "cor" only
+    before = s.alpha_beta("v", "p")
+    with pytest.raises(RetractionError, match="compacted"):
+        s.retract("rev")
+    assert s.alpha_beta("v", "p") == before and s.has_event("rev")
+
+
+def test_move_node_migrates_everything_once() -> None:
+    s = ProvenanceStore()
+    s.record("keep", "p", "e1", 0, 1.0, 0.0)
+    s.record("gone", "p", "e2", 1, 2.0, 1.0)
+    s.record("gone", "q", "e3", 2, 0.0, 1.0, EntryStatus.REFUSED)
+    s.compact(1)
+    total = s.count_entries()
+    s.move_node("gone", "keep")
+    assert s.count_entries() == total
+    assert s.alpha_beta("keep", "p") == pytest.approx((4.0, 2.0))
+    assert s.pending("keep", "q")[0].event_id == "e3"
+    assert ("gone", "p") not in s
+
+
+@settings(max_examples=30)
+@given(st.lists(record, max_size=40))
+def test_serialisation_round_trip(records) -> None:
+    s = _build(records)
+    s.compact(len(records) // 2)
+    again = ProvenanceStore.from_dict(s.to_dict())
+    for k in s.pairs():
+        assert _close(again.alpha_beta(*k), s.alpha_beta(*k))
+    assert len([e for e in again.quarantine if e.alive]) == len([e for e in s.quarantine if e.alive and e.status is EntryStatus.QUARANTINED])
