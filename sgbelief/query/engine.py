@@ -22,7 +22,7 @@ once. Nothing is written to the graph.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -144,16 +144,23 @@ class QueryEngine:
     """Answers compound queries over one graph with per-batch caches of every component read.
 
     ``registry``: geometric predicates (default :data:`DEFAULT_REGISTRY`); ``config``: their
-    thresholds; ``tau``: retrieval threshold; ``require_evidence``: see the module docstring.
+    thresholds; ``tau``: retrieval threshold; ``require_evidence``: see the module docstring;
+    ``probability``: ``f(node, predicate) -> p`` used for belief literals (default
+    ``graph.probability``; pass ``operator.probability`` bound to the graph for an operator's
+    recalibrated probability); ``use_precomputed``: a node attribute
+    ``geometric_predicates = {name: bool}`` (simulated ``nodes.json``) overrides the registry.
     The caches assume the graph does not change while the engine is in use (call :meth:`clear`
     after updates)."""
 
     def __init__(self, graph: Any, *, registry: RelationRegistry | None = None,
                  config: RelationConfig | None = None, tau: float = 0.5,
-                 require_evidence: bool = True) -> None:
+                 require_evidence: bool = True, probability: Callable[[Any, str], float] | None = None,
+                 use_precomputed: bool = True) -> None:
         if not 0.0 <= tau <= 1.0:
             raise ValueError(f"tau must be in [0, 1], got {tau!r}")
         self.graph = graph
+        self.probability_fn = probability if probability is not None else graph.probability
+        self.use_precomputed = use_precomputed
         self.registry = registry if registry is not None else DEFAULT_REGISTRY
         self.config = config or RelationConfig()
         self.tau = tau
@@ -211,7 +218,7 @@ class QueryEngine:
         cache = self._prob.setdefault(predicate, {})
         p = cache.get(node)
         if p is None:
-            p = float(self.graph.probability(node, predicate))
+            p = float(self.probability_fn(node, predicate))
             cache[node] = p
             self.belief_reads += 1
         return p
@@ -220,10 +227,20 @@ class QueryEngine:
         cache = self._geo.setdefault(name, {})
         if node in cache:
             return cache[node]
-        v = self.registry.get(name)(self.ctx, node)
+        v: bool | None = None
+        pre = self.graph.node_attrs(node).get("geometric_predicates") if self.use_precomputed else None
+        if isinstance(pre, Mapping) and name in pre and pre[name] is not None:
+            v = bool(pre[name])
+        else:
+            v = self.registry.get(name)(self.ctx, node)
         cache[node] = v
         self.geometric_evals += 1
         return v
+
+    def preload_geometric(self, name: str, values: Mapping[Any, bool | None]) -> None:
+        """Seed the cache of geometric predicate ``name`` (e.g. values computed on a ground-truth
+        copy of the map, shared by several operators' graphs)."""
+        self._geo.setdefault(name, {}).update(values)
 
     # -- scoring -----------------------------------------------------------------------------
     def candidates(self, compound: Compound, kinds: Mapping[str, str], nodes: Iterable[Any] | None = None) -> list[Any]:

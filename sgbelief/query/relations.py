@@ -275,6 +275,16 @@ class GeometryContext:
     def attrs(self, node: Any) -> dict[str, Any]:
         return self.graph.node_attrs(node)
 
+    def attr(self, node: Any, key: str) -> Any:
+        """A node attribute: top level first, then inside its ``attributes`` dict (nodes.json)."""
+        a = self.graph.node_attrs(node)
+        v = a.get(key)
+        if v is None:
+            inner = a.get("attributes")
+            if isinstance(inner, Mapping):
+                v = inner.get(key)
+        return v
+
     def box(self, node: Any) -> Box | None:
         """The node's box (degenerate at the centroid when only a centroid is known), or None."""
         i = self.idx(node)
@@ -696,18 +706,17 @@ def is_stationary(ctx: GeometryContext, node: Any) -> bool | None:
     """Every centroid of ``track`` (>= stationary_min_track entries) within
     stationary_max_displacement (1.0 m) of the track's median; else ``speed`` <=
     stationary_max_speed (0.3 m/s); else the boolean ``stationary``."""
-    a = ctx.attrs(node)
     cfg = ctx.config
-    track = a.get("track")
+    track = ctx.attr(node, "track")
     if track is not None:
         pts = _track_points(track)
         if pts is not None and len(pts) >= cfg.stationary_min_track:
             med = np.median(pts, axis=0)
             return float(np.max(np.linalg.norm(pts - med, axis=1))) <= cfg.stationary_max_displacement
-    if a.get("speed") is not None:
-        return float(a["speed"]) <= cfg.stationary_max_speed
-    if a.get("stationary") is not None:
-        return bool(a["stationary"])
+    if ctx.attr(node, "speed") is not None:
+        return float(ctx.attr(node, "speed")) <= cfg.stationary_max_speed
+    if ctx.attr(node, "stationary") is not None:
+        return bool(ctx.attr(node, "stationary"))
     return None
 
 
@@ -715,36 +724,34 @@ def is_stationary(ctx: GeometryContext, node: Any) -> bool | None:
 def is_near_road_px(ctx: GeometryContext, node: Any) -> bool | None:
     """Image-space distance to the nearest road pixel ``road_distance_px`` <= near_road_px (50 px);
     else the boolean ``near_road``."""
-    a = ctx.attrs(node)
-    if a.get("road_distance_px") is not None:
-        return float(a["road_distance_px"]) <= ctx.config.near_road_px
-    if a.get("near_road") is not None:
-        return bool(a["near_road"])
+    if ctx.attr(node, "road_distance_px") is not None:
+        return float(ctx.attr(node, "road_distance_px")) <= ctx.config.near_road_px
+    if ctx.attr(node, "near_road") is not None:
+        return bool(ctx.attr(node, "near_road"))
     return None
 
 
 @relation("is_on_sidewalk", needs=("on_sidewalk",))
 def is_on_sidewalk(ctx: GeometryContext, node: Any) -> bool | None:
     """The boolean attribute ``on_sidewalk`` (footprint on sidewalk pixels / cells)."""
-    v = ctx.attrs(node).get("on_sidewalk")
+    v = ctx.attr(node, "on_sidewalk")
     return None if v is None else bool(v)
 
 
 @relation("is_at_intersection", needs=("at_intersection|intersection_distance",))
 def is_at_intersection(ctx: GeometryContext, node: Any) -> bool | None:
     """The boolean ``at_intersection``; else ``intersection_distance`` <= intersection_radius (15 m)."""
-    a = ctx.attrs(node)
-    if a.get("at_intersection") is not None:
-        return bool(a["at_intersection"])
-    if a.get("intersection_distance") is not None:
-        return float(a["intersection_distance"]) <= ctx.config.intersection_radius
+    if ctx.attr(node, "at_intersection") is not None:
+        return bool(ctx.attr(node, "at_intersection"))
+    if ctx.attr(node, "intersection_distance") is not None:
+        return float(ctx.attr(node, "intersection_distance")) <= ctx.config.intersection_radius
     return None
 
 
 @relation("is_visible_in_drive_direction", needs=("visible_in_drive_direction",))
 def is_visible_in_drive_direction(ctx: GeometryContext, node: Any) -> bool | None:
     """The boolean ``visible_in_drive_direction`` (inside the forward field of view)."""
-    v = ctx.attrs(node).get("visible_in_drive_direction")
+    v = ctx.attr(node, "visible_in_drive_direction")
     return None if v is None else bool(v)
 
 
