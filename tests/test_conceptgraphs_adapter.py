@@ -1,0 +1,260 @@
+"""ConceptGraphs drop-in backend on stand-ins with real keys, open3d clouds/boxes and torch similarities."""
+
+from __future__ import annotations
+
+import copy
+from collections import Counter
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("open3d")
+
+import cg_fake_conceptgraph as fake  # noqa: E402
+
+from sgbelief.adapters.conceptgraphs import ClassVocabulary, ConceptGraphsBackend  # noqa: E402
+from sgbelief.adapters.conceptgraphs.functions import BeliefLabelledObject  # noqa: E402
+from sgbelief.adapters.conceptgraphs.standins import (  # noqa: E402
+    DetectionList,
+    MapObjectList,
+    majority_class,
+    make_detection,
+)
+
+CLASSES = ["chair", "table", "sofa"]
+
+
+def cfg(**kw):
+    base = dict(downsample_voxel_size=0.05, dbscan_remove_noise=False, dbscan_eps=0.1, dbscan_min_points=10,
+                spatial_sim_type="iou", device="cpu", merge_overlap_thresh=0.5, merge_visual_sim_thresh=0.5,
+                merge_text_sim_thresh=0.5, obj_min_points=1, obj_min_detections=1)
+    base.update(kw)
+    return SimpleNamespace(**base)
+
+
+def blob(center, n=120, seed=0):
+    return np.asarray(center, dtype=float) + 0.2 * np.random.default_rng(seed).random((n, 3))
+
+
+def wrong_label_stream(generation="main", geo_key=False):
+    """40 detections of one chair: 'table' more often (low confidence), 'chair' less often (high)."""
+    r = np.random.default_rng(1).random(40)
+    feat = np.random.default_rng(7).normal(size=16)
+    out = []
+    for k in range(40):
+        is_table = k % 2 == 0 or k % 7 == 1
+        cid, conf = (1, 0.5 + 0.15 * r[k]) if is_table else (0, 0.8 + 0.15 * r[k])
+        det = make_detection(blob((0, 0, 0), seed=k), cid, CLASSES[cid], conf, k, generation=generation,
+                             feature=feat, seed=k)
+        if geo_key:
+            det["geometric_label"] = "chair"
+        out.append(det)
+    return out
+
+
+def run_main(functions, stream, c):
+    objects = MapObjectList(device="cpu")
+    for det in stream:
+        if not objects:
+            objects.append(det)
+            continue
+        objects = functions.merge_detections_to_objects(c, DetectionList([det]), objects, torch.tensor([[1.5]]))
+    return objects
+
+
+# ---------------------------------------------------------------- vocabulary
+def test_vocabulary_maps_aliases_overrides_and_unknown_names():
+    v = ClassVocabulary.default()
+    assert v.predicate("chair") == "is_chair"
+    assert v.predicate("Office Chair") == "is_chair"
+    assert v.predicate("kitchen table") == "is_table_or_desk"
+    assert v.predicate("potted plant") == "is_potted_plant"
+    assert v.predicate("wall") is None
+
+
+# ---------------------------------------------------------------- labels from beliefs
+def test_majority_keeps_wrong_label_that_comod_with_geometric_channel_does_not():
+    stream = wrong_label_stream()
+    counts = Counter(d["class_id"][0] for d in stream)
+    assert counts[1] > counts[0]  # the detector says "table" more often
+    backend = ConceptGraphsBackend("comod", channel=lambda det, node, t: "chair")
+    f = backend.functions("main")
+    objects = run_main(f, copy.deepcopy(stream), cfg())
+    assert len(objects) == 1
+    assert majority_class(objects[0]["class_id"]) == 1  # ConceptGraphs' vote: table (wrong)
+    assert f.get_most_common_class(objects) == [0]  # beliefs: chair
+    beliefs = backend.beliefs(objects[0])
+    assert beliefs["is_chair"].mean > 0.5
+    assert "is_table_or_desk" not in beliefs or beliefs["is_table_or_desk"].mean <= 0.5
+    assert backend.label_of(objects[0]) == "chair"
+    # each detection counted exactly once
+    assert backend.routed_detections == objects[0]["num_detections"] == 40
+
+
+def test_per_detection_geometric_label_key_on_ali_dev_strict_merge():
+    stream = wrong_label_stream("ali-dev", geo_key=True)
+    backend = ConceptGraphsBackend("comod")
+    f = backend.functions("ali-dev")
+    objects = MapObjectList(device="cpu")
+    for det in stream:
+        if not objects:
+            objects.extend(DetectionList([det]))
+            continue
+        sims = torch.tensor([[1.5]])
+        idx = f.match_detections_to_objects(sims, 1.1)
+        objects = f.merge_obj_matches(DetectionList([det]), objects, idx, 0.05, False, 0.1, 10, "iou", "cpu")
+        # the pipeline's inline relabel loop (Counter vote) cannot overwrite the belief label
+        for obj in objects:
+            obj["class_name"] = CLASSES[Counter(obj["class_id"]).most_common(1)[0][0]]
+    obj = objects[0]
+    assert "geometric_label" not in obj
+    assert isinstance(obj, BeliefLabelledObject) and isinstance(obj["class_name"], str)
+    assert obj["class_name"] == "chair"
+    assert CLASSES[Counter(obj["class_id"]).most_common(1)[0][0]] == "table"
+    # copies / pickles are plain dicts
+    assert type(copy.deepcopy(obj)) is dict
+
+
+def test_unknown_label_when_nothing_commits():
+    backend = ConceptGraphsBackend("comod", unknown_label="unknown", unknown_class_id=-1)
+    f = backend.functions("main")
+    det = make_detection(blob((0, 0, 0)), 2, "sofa", 0.5, 0)
+    objects = MapObjectList([det])
+    assert f.get_most_common_class(objects) == [2]  # never seen by the backend: ConceptGraphs' vote
+    backend.ensure_node(det)
+    assert f.get_most_common_class(objects) == [-1]
+    assert backend.label_of(det) == "unknown"
+
+
+# ---------------------------------------------------------------- return contracts
+def test_same_return_contract_as_original_on_stand_ins():
+    c = cfg()
+    rng = np.random.default_rng(3)
+    frames = []
+    for t in range(4):
+        frames.append([make_detection(blob((3 * j, 0, 0), seed=10 * t + j), j % 3, CLASSES[j % 3],
+                                      0.7, t, mask_idx=j, feature=rng.normal(size=16) if t == 0 else None,
+                                      seed=10 * t + j) for j in range(3)])
+
+    def drive(merge, frames):
+        objects = MapObjectList()
+        for dets in frames:
+            if not objects:
+                objects.extend(dets)
+                continue
+            sim = torch.full((len(dets), len(objects)), float("-inf"))
+            for i in range(len(dets)):
+                sim[i, i] = 1.4
+            sim[2, 2] = float("-inf")  # one unmatched detection per frame -> new object
+            objects = merge(c, DetectionList(dets), objects, sim)
+        return objects
+
+    ref = drive(fake.merge_detections_to_objects, copy.deepcopy(frames))
+    backend = ConceptGraphsBackend("comod")
+    ours = drive(backend.functions("main").merge_detections_to_objects, copy.deepcopy(frames))
+    assert type(ours) is MapObjectList and len(ours) == len(ref)
+    for a, b in zip(ours, ref):
+        assert a["class_id"] == b["class_id"] and a["image_idx"] == b["image_idx"]
+        assert a["num_detections"] == b["num_detections"]
+        assert len(a["pcd"].points) == len(b["pcd"].points)
+        assert np.allclose(np.asarray(a["bbox"].get_box_points()), np.asarray(b["bbox"].get_box_points()))
+        assert torch.allclose(a["clip_ft"], b["clip_ft"])
+    assert len(backend.graph) == len(ours)
+    assert backend.graph.evidence_count() == sum(o["num_detections"] for o in ours)
+
+
+def test_spread_targeting_over_objects_above_threshold():
+    backend = ConceptGraphsBackend("majority")
+    f = backend.functions("ali-dev")
+    a = make_detection(blob((0, 0, 0)), 0, "chair", 0.9, 0, generation="ali-dev", seed=1)
+    b = make_detection(blob((0.1, 0, 0)), 0, "chair", 0.9, 0, mask_idx=1, generation="ali-dev", seed=2)
+    objects = MapObjectList([a, b])
+    det = make_detection(blob((0.05, 0, 0)), 0, "chair", 0.9, 1, generation="ali-dev", seed=3)
+    sims = torch.tensor([[1.5, 0.5]])  # 0.5 is above the threshold 0.2 -> T = (0.75, 0.25)
+    idx = f.match_detections_to_objects(sims, 0.2)
+    assert idx == [0]
+    backend.keep_reports = True
+    objects = f.merge_obj_matches(DetectionList([det]), objects, idx, 0.05, False, 0.1, 10, "iou", "cpu")
+    targets = [dict((o.node, o.mass) for o in r.targets) for r in backend.reports]
+    assert targets[-1] == pytest.approx({str(a["id"]): 0.75, str(b["id"]): 0.25})
+    assert objects[0]["num_detections"] == 2 and objects[1]["num_detections"] == 1
+
+
+# ---------------------------------------------------------------- post-processing
+def test_merge_objects_migrates_beliefs_and_counts_each_detection_once():
+    c = cfg(merge_overlap_thresh=0.3)
+    feat = np.random.default_rng(5).normal(size=16)
+    objs = [make_detection(blob((0, 0, 0), seed=s), 0, "chair", 0.8, s, feature=feat, seed=s) for s in range(3)]
+    objs.append(make_detection(blob((9, 9, 9)), 1, "table", 0.8, 7, feature=-feat, seed=9))
+    backend = ConceptGraphsBackend("comod")
+    f = backend.functions("main")
+    objects = MapObjectList(objs)
+    for o in objects:
+        backend.ensure_node(o)
+    before = backend.graph.evidence_count()
+    assert len(backend.graph) == 4 and before == 4
+    ref = fake.merge_objects(c, MapObjectList(copy.deepcopy(objs)))
+    merged = f.merge_objects(c, objects)
+    assert len(merged) == len(ref) == 2
+    assert sorted(o["num_detections"] for o in merged) == sorted(o["num_detections"] for o in ref)
+    assert backend.graph.evidence_count() == before  # nothing lost, nothing counted twice
+    live = [n for n in backend.graph.nodes()]
+    assert len(live) == 2
+    assert {backend.node_of(o) for o in merged} == set(live)
+    # the object merged away twice by ConceptGraphs' loop still contributes once
+    node = backend.node_of(merged[0] if merged[0]["num_detections"] > 1 else merged[1])
+    assert backend.graph.evidence_count(node) == 3
+
+
+def test_filter_objects_marks_removed_nodes():
+    c = cfg(obj_min_detections=2)
+    backend = ConceptGraphsBackend("comod")
+    f = backend.functions("main")
+    objects = MapObjectList([make_detection(blob((0, 0, 0)), 0, "chair", 0.8, 0)])
+    backend.ensure_node(objects[0])
+    node = backend.node_of(objects[0])
+    out = f.filter_objects(c, objects)
+    assert len(out) == 0
+    assert backend.graph.nx.nodes[node]["cg_filtered"] is True
+
+
+# ---------------------------------------------------------------- patching
+def test_patch_swaps_and_restores_every_binding():
+    mods = fake.install()
+    try:
+        ut, mp, sc = mods["conceptgraph.slam.utils"], mods["conceptgraph.slam.mapping"], mods["conceptgraph.slam.slam_classes"]
+        pipe = mods["conceptgraph.slam.cfslam_pipeline_batch"]
+        saved = {(m.__name__, n): getattr(m, n) for m in (ut, mp, pipe)
+                 for n in ("merge_obj2_into_obj1", "merge_objects", "filter_objects", "merge_detections_to_objects",
+                           "MapObjectList") if hasattr(m, n)}
+        DL = sc.DetectionList
+        gmc = DL.__dict__["get_most_common_class"]
+        with pytest.raises(TypeError):
+            sc.MapObjectList(device="cpu")
+        backend = ConceptGraphsBackend("comod")
+        with backend.patch():
+            assert backend.generation == "main"
+            for (modname, name), old in saved.items():
+                assert getattr(__import__("sys").modules[modname], name) is not old, (modname, name)
+            assert DL.__dict__["get_most_common_class"] is not gmc
+            assert issubclass(sc.DetectionList, DL)
+            objects = pipe.MapObjectList(device="cpu")  # kwargs accepted while patched
+            objects.append(make_detection(blob((0, 0, 0)), 1, "table", 0.6, 0))
+            det = make_detection(blob((0, 0, 0)), 0, "chair", 0.9, 1, seed=1)
+            objects = pipe.merge_detections_to_objects(cfg(), DetectionList([det]), objects, torch.tensor([[1.2]]))
+            assert backend.graph.evidence_count() == 2
+            objects.get_most_common_class()
+        for (modname, name), old in saved.items():
+            assert getattr(__import__("sys").modules[modname], name) is old, (modname, name)
+        assert sc.DetectionList is DL and DL.__dict__["get_most_common_class"] is gmc
+        with pytest.raises(TypeError):
+            pipe.MapObjectList(device="cpu")
+    finally:
+        fake.uninstall()
+
+
+def test_stand_in_lists_accept_keywords():
+    assert MapObjectList(device="cuda") == []
+    assert DetectionList([1, 2], device="cpu") == [1, 2]
