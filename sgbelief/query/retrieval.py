@@ -1,0 +1,311 @@
+"""Compound-query retrieval evaluation (the paper's Table 3, "full pool" columns).
+
+For every operator: replay the event log into a fresh graph, then for every named compound
+
+* **pool** (``n``): nodes targeted (mass > 0) by at least one event on each of the compound's
+  positive belief predicates -- the elements the operator was asked about;
+* **positives**: pool nodes for which the compound holds in ground truth: every belief literal
+  from the ground-truth class (``truth(node, predicate)``, negated literals inverted) and every
+  geometric literal from the ground-truth geometry (authoritative, computed once on a copy of the
+  map carrying ground-truth labels; committed beliefs are *not* used there);
+* **retrieved**: pool nodes with ``P(compound) >= tau`` (default 0.5) where belief components are
+  the operator's probability (``operator.probability``, i.e. after its recalibration, if any) and
+  the geometric components are the same ground-truth indicators;
+* **F1** of retrieved vs. positives (``sgbelief.eval.metrics.retrieval_f1``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from sgbelief.query.engine import BELIEF, GEOMETRIC, QueryEngine
+from sgbelief.query.named import NamedQuery, load_query_set, named_queries
+from sgbelief.query.relations import DEFAULT_REGISTRY, RelationConfig, RelationRegistry
+
+__all__ = ["RetrievalData", "CompoundScore", "evaluate_retrieval", "scannet_retrieval_data",
+           "suite_retrieval_data", "format_scores"]
+
+
+@dataclass
+class RetrievalData:
+    """Everything a retrieval evaluation needs.
+
+    ``nodes``: node id -> attributes (geometry + ground-truth ``label``); ``truth(node, predicate)``
+    -> bool: ground truth of a belief predicate; ``events``: validated event records
+    (``sgbelief.eval.formats.EventRecord``); ``channel_factory()``: a fresh geometric channel per
+    operator; ``vocabulary``: the SubsumptionTable; ``queries``: named compounds to score."""
+
+    name: str
+    nodes: dict[Any, dict[str, Any]]
+    truth: Callable[[Any, str], bool]
+    events: Sequence[Any]
+    channel_factory: Callable[[], Any]
+    vocabulary: Any
+    queries: dict[str, NamedQuery]
+    config: RelationConfig = field(default_factory=RelationConfig)
+
+
+@dataclass(frozen=True)
+class CompoundScore:
+    """One (compound, operator) cell: pool size, positive rate, F1 at P >= tau."""
+
+    query: str
+    title: str
+    group: str
+    operator: str
+    n: int
+    positives: int
+    pos_rate: float
+    retrieved: int
+    tp: int
+    fp: int
+    fn: int
+    precision: float
+    recall: float
+    f1: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _build_graph(nodes: Mapping[Any, Mapping[str, Any]], vocabulary: Any = None) -> Any:
+    from sgbelief.graph.scene_graph import SceneGraph
+
+    g = SceneGraph(vocabulary=vocabulary)
+    for node, attrs in nodes.items():
+        g.add_node(node, **dict(attrs))
+    return g
+
+
+def _event_obj(rec: Any, i: int) -> Any:
+    from sgbelief.fusion.events import EvidenceEvent
+
+    if isinstance(rec, EvidenceEvent):
+        return rec
+    return EvidenceEvent.trusted(dict(rec.targets), rec.predicate, float(rec.confidence), rec.context, int(rec.t),
+                                 rec.id or f"ev{i:08d}")
+
+
+def evaluate_retrieval(data: RetrievalData, operators: Iterable[str], *, tau: float = 0.5,
+                       operator_config: Any = None, registry: RelationRegistry | None = None) -> list[CompoundScore]:
+    """Scores for every (named compound, operator); see the module docstring for the definitions."""
+    from sgbelief.eval.metrics import retrieval_f1
+    from sgbelief.fusion.registry import make_operator
+
+    registry = registry or DEFAULT_REGISTRY
+    gt_config = replace(data.config, use_committed_labels=False)
+    gt_graph = _build_graph(data.nodes)
+    gt_engine = QueryEngine(gt_graph, registry=registry, config=gt_config, require_evidence=False)
+
+    # pools: nodes targeted with mass > 0 per predicate
+    targeted: dict[str, set[Any]] = {}
+    for rec in data.events:
+        s = targeted.setdefault(rec.predicate, set())
+        s.update(n for n, m in rec.targets.items() if m > 0)
+
+    # ground truth of every compound over its pool, geometric values shared with the operators
+    geo_values: dict[str, dict[Any, bool | None]] = {}
+    plans: dict[str, tuple[NamedQuery, list[Any], set[Any]]] = {}
+    for key, nq in data.queries.items():
+        pos_beliefs = [lit.name for lit in nq.compound.literals if lit in nq.belief and not lit.negated]
+        pool_set: set[Any] | None = None
+        for p in pos_beliefs:
+            pool_set = set(targeted.get(p, set())) if pool_set is None else pool_set & targeted.get(p, set())
+        pool = sorted(pool_set or set(), key=str)
+        positives: set[Any] = set()
+        for node in pool:
+            ok = True
+            for lit in nq.compound.literals:
+                if lit in nq.belief:
+                    val: bool | None = bool(data.truth(node, lit.name))
+                else:
+                    vals = geo_values.setdefault(lit.name, {})
+                    if node not in vals:
+                        vals[node] = gt_engine.geometric(node, lit.name) if node in data.nodes else None
+                    val = vals[node]
+                if val is None or val == lit.negated:
+                    ok = False
+                    break
+            if ok:
+                positives.add(node)
+        plans[key] = (nq, pool, positives)
+    # fill the remaining geometric values of pool nodes (short-circuit above may have skipped some)
+    for key, (nq, pool, _) in plans.items():
+        for lit in nq.geometric:
+            vals = geo_values.setdefault(lit.name, {})
+            for node in pool:
+                if node not in vals:
+                    vals[node] = gt_engine.geometric(node, lit.name) if node in data.nodes else None
+
+    scores: list[CompoundScore] = []
+    for op_name in operators:
+        graph = _build_graph(data.nodes, data.vocabulary)
+        op = make_operator(op_name, operator_config, data.vocabulary)
+        channel = data.channel_factory()
+        for i, rec in enumerate(data.events):
+            op.update(graph, _event_obj(rec, i), channel)
+        engine = QueryEngine(graph, registry=registry, config=gt_config, tau=tau, require_evidence=False,
+                             probability=lambda n, p, _op=op, _g=graph: _op.probability(_g, n, p))
+        for name, vals in geo_values.items():
+            engine.preload_geometric(name, vals)
+        for key, (nq, pool, positives) in plans.items():
+            compound, kinds = nq.compound, {lit.name: (BELIEF if lit in nq.belief else GEOMETRIC)
+                                            for lit in nq.compound.literals}
+            retrieved = set()
+            for node in pool:
+                m = engine.score(node, compound, kinds, prune=True, tau=tau)
+                if m is not None and m.retrieved:
+                    retrieved.add(node)
+            s = retrieval_f1(retrieved, positives)
+            n = len(pool)
+            scores.append(CompoundScore(key, nq.title, nq.group, op_name if isinstance(op_name, str) else op.name,
+                                        n, len(positives), (len(positives) / n if n else 0.0), len(retrieved),
+                                        s.tp, s.fp, s.fn, s.precision, s.recall, s.f1))
+    return scores
+
+
+def format_scores(scores: Sequence[CompoundScore], title: str = "") -> str:
+    """Text table: one row per compound; n, pos %, then F1 per operator."""
+    ops: list[str] = []
+    for s in scores:
+        if s.operator not in ops:
+            ops.append(s.operator)
+    by_q: dict[str, dict[str, CompoundScore]] = {}
+    for s in scores:
+        by_q.setdefault(s.query, {})[s.operator] = s
+    w = max([len("compound")] + [len(next(iter(d.values())).title) for d in by_q.values()])
+    head = f"{'compound'.ljust(w)}  {'n':>6}  {'pos %':>6}  " + "  ".join(f"{o:>11}" for o in ops)
+    lines = ([title] if title else []) + [head, "-" * len(head)]
+    group = None
+    for d in by_q.values():
+        first = next(iter(d.values()))
+        if first.group != group and first.group:
+            group = first.group
+            lines.append(f"[{group}]")
+        cells = "  ".join(f"{d[o].f1:>11.3f}" if o in d else f"{'':>11}" for o in ops)
+        lines.append(f"{first.title.ljust(w)}  {first.n:>6d}  {100 * first.pos_rate:>6.1f}  {cells}")
+    lines.append(f"(F1 at P >= tau over the full pool; n = nodes targeted by the VLM-typed predicate's events)")
+    return "\n".join(lines)
+
+
+def _queries_for(spec: str | Path | Mapping[str, NamedQuery]) -> tuple[dict[str, NamedQuery], RelationConfig]:
+    if isinstance(spec, Mapping):
+        qs = dict(spec)
+        cfg = next(iter(qs.values())).config if qs else RelationConfig()
+        return qs, cfg
+    p = Path(spec)
+    if p.suffix in (".yaml", ".yml") or p.exists():
+        qset = load_query_set(p)
+        return qset.queries, qset.config
+    qs = named_queries(str(spec))
+    return qs, next(iter(qs.values())).config
+
+
+def _load_vocab(vocab: Any) -> Any:
+    from sgbelief.fusion.compatibility import SubsumptionTable
+
+    if isinstance(vocab, SubsumptionTable):
+        return vocab
+    p = Path(vocab)
+    if not p.exists():
+        from sgbelief.resources import config_path
+
+        p = config_path("vocab", f"{vocab}.yaml") if not str(vocab).endswith(".yaml") else config_path(str(vocab))
+    return SubsumptionTable.from_yaml(p)
+
+
+def scannet_retrieval_data(scenes: str | Path, events: str | Path, vocab: Any = "scannet", *,
+                           labels: str | Path | None = None, queries: Any = "scannet",
+                           channel: str = "scannet", max_distance: float = 0.05) -> RetrievalData:
+    """Retrieval data from ScanNet scene folders + an event log addressing ``<sceneId>/<objectId>``.
+
+    Ground truth: the aggregation's NYU40 labels (belief predicates: label in the vocabulary's
+    positive set); geometry: the objects' boxes. ``channel``: 'scannet' (mesh-label oracle,
+    :class:`~sgbelief.adapters.scannet.ScanNetChannel`) or 'recorded' (the events' ``geometric``)."""
+    from sgbelief.adapters.scannet import ScanNetChannel, load_scenes
+    from sgbelief.eval.formats import read_events
+
+    table = _load_vocab(vocab)
+    loaded = load_scenes(scenes, labels)
+    nodes: dict[Any, dict[str, Any]] = {}
+    for sc in loaded:
+        fz = sc.floor_z
+        for oid, o in sorted(sc.objects.items()):
+            nodes[sc.node_id(oid)] = {"centroid": o.centroid, "bbox": o.bbox, "label": o.nyu40_label,
+                                      "raw_label": o.raw_label, "scene": sc.scene_id, "object_id": oid,
+                                      "floor_z": fz}
+    recs = read_events(events)
+    qs, cfg = _queries_for(queries)
+
+    def truth(node: Any, predicate: str) -> bool:
+        lab = nodes.get(node, {}).get("label")
+        return lab is not None and table.outcome(predicate, lab) == 1
+
+    if channel == "scannet":
+        def factory() -> Any:
+            return _CachedChannel(ScanNetChannel(loaded, max_distance=max_distance))
+    elif channel == "recorded":
+        factory = _recorded_factory(recs)
+    else:
+        raise ValueError("channel must be 'scannet' or 'recorded'")
+    return RetrievalData(f"scannet:{Path(scenes).name}", nodes, truth, recs, factory, table, qs, cfg)
+
+
+class _CachedChannel:
+    """Memoises a static channel's labels per node (mesh labels do not change over time)."""
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self._cache: dict[Any, str | None] = {}
+
+    def label(self, node: Any, t: int) -> str | None:
+        if node not in self._cache:
+            self._cache[node] = self.inner.label(node, t)
+        return self._cache[node]
+
+
+def _recorded_factory(recs: Sequence[Any]) -> Callable[[], Any]:
+    from sgbelief.fusion.channel import RecordedChannel
+
+    def factory() -> Any:
+        ch = RecordedChannel(hold=False)
+        for rec in recs:
+            for node, lab in (rec.geometric or {}).items():
+                ch.record(node, rec.t, lab)
+        return ch
+
+    return factory
+
+
+def suite_retrieval_data(suite: str | Path, vocab: Any, *, queries: Any = None) -> RetrievalData:
+    """Retrieval data from a simulated suite folder holding ``nodes.json``, ``events.jsonl`` and
+    ``truth.json`` (docs/formats.md). The channel replays the events' recorded ``geometric``
+    labels; geometric predicates use the nodes' precomputed ``geometric_predicates`` when present
+    and the registry otherwise. ``queries`` defaults to the vocabulary's dataset name."""
+    from sgbelief.eval.formats import read_events, read_nodes, read_truth
+
+    suite = Path(suite)
+    for f in ("nodes.json", "events.jsonl", "truth.json"):
+        if not (suite / f).is_file():
+            raise FileNotFoundError(f"simulated suite {suite}: missing {f}")
+    table = _load_vocab(vocab)
+    nf = read_nodes(suite / "nodes.json")
+    nodes: dict[Any, dict[str, Any]] = {}
+    for nid, info in nf.nodes.items():
+        d = info.model_dump()
+        attrs = {k: v for k, v in d.items() if k not in ("bbox_min", "bbox_max") and v is not None}
+        attrs["bbox"] = (tuple(info.bbox_min), tuple(info.bbox_max))
+        nodes[nid] = attrs
+    truth_map = read_truth(suite / "truth.json")
+    recs = read_events(suite / "events.jsonl")
+    if queries is None:
+        queries = getattr(table, "name", None) or "kitti360"
+    qs, cfg = _queries_for(queries)
+
+    def truth(node: Any, predicate: str) -> bool:
+        return bool(truth_map.get(str(node), {}).get(predicate, 0))
+
+    return RetrievalData(f"suite:{suite.name}", nodes, truth, recs, _recorded_factory(recs), table, qs, cfg)
