@@ -180,7 +180,7 @@ def test_nodes_round_trip_and_errors(tmp_path):
         "suite": "toy",
         "scenes": {"s0": {"kind": "indoor", "t_start": 0, "t_end": 9, "ego_track": [[0, 0, 0, 1.5, 0.0]]}},
         "nodes": {"s0/0001": {"scene": "s0", "label": "chair", "centroid": [1, 2, 0.4],
-                              "bbox_min": [0.7, 1.7, 0], "bbox_max": [1.3, 2.3, 0.9], "facing": [1, 0, 0],
+                              "bbox_min": [0.7, 1.7, 0], "bbox_max": [1.3, 2.3, 0.9], "front": [1, 0, 0],
                               "geometric_predicates": {"is_near_window": True}}},
     })
     write_nodes(p, doc)

@@ -163,7 +163,7 @@ class NodeInfo(BaseModel):
     bbox_max: tuple[float, float, float]
     first_seen: int | None = Field(default=None, description="first time step the element is in view")
     last_seen: int | None = Field(default=None, description="last time step the element is in view")
-    facing: tuple[float, float, float] | None = Field(default=None, description="unit front direction")
+    front: tuple[float, float, float] | None = Field(default=None, description="unit horizontal front direction")
     track: list[tuple[int, float, float, float]] | None = Field(
         default=None, description="centroid over time [[t, x, y, z], ...] (outdoor)"
     )
