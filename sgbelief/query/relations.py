@@ -194,10 +194,6 @@ def box_distance(a: Box, b: Box) -> float:
     return float(math.sqrt(float(gap @ gap)))
 
 
-def _overlap_lengths(a_lo: np.ndarray, a_hi: np.ndarray, b_lo: np.ndarray, b_hi: np.ndarray) -> np.ndarray:
-    return np.minimum(a_hi, b_hi) - np.maximum(a_lo, b_lo)
-
-
 # --------------------------------------------------------------------------------------------
 # evaluation context: cached arrays + per-scene spatial indexes over one graph
 # --------------------------------------------------------------------------------------------

@@ -187,7 +187,7 @@ def format_scores(scores: Sequence[CompoundScore], title: str = "") -> str:
             lines.append(f"[{group}]")
         cells = "  ".join(f"{d[o].f1:>11.3f}" if o in d else f"{'':>11}" for o in ops)
         lines.append(f"{first.title.ljust(w)}  {first.n:>6d}  {100 * first.pos_rate:>6.1f}  {cells}")
-    lines.append(f"(F1 at P >= tau over the full pool; n = nodes targeted by the VLM-typed predicate's events)")
+    lines.append("(F1 at P >= tau over the full pool; n = nodes targeted by the VLM-typed predicate's events)")
     return "\n".join(lines)
 
 
