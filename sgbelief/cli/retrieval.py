@@ -20,7 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="simulated suite folder with nodes.json, events.jsonl, truth.json (repeatable)")
     parser.add_argument("--events", metavar="EVENTS.jsonl", help="event log replayed over the ScanNet scenes")
     parser.add_argument("--vocab", metavar="VOCAB", default=None,
-                        help="vocabulary YAML or shipped name (scannet | kitti360); default by source")
+                        help="vocabulary YAML or shipped name (scannet | kitti360); default: scannet for --scenes and indoor "
+                             "suites, kitti360 for outdoor suites")
     parser.add_argument("--labels", metavar="TSV", default=None,
                         help="scannetv2-labels.combined.tsv (default: found next to / above --scenes)")
     parser.add_argument("--queries", metavar="NAME_OR_YAML", default=None,
@@ -50,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
         datasets.append(scannet_retrieval_data(args.scenes, args.events, args.vocab or "scannet", labels=args.labels,
                                                queries=args.queries or "scannet", channel=args.channel))
     for suite in args.suite:
-        datasets.append(suite_retrieval_data(suite, args.vocab or "kitti360", queries=args.queries))
+        datasets.append(suite_retrieval_data(suite, args.vocab, queries=args.queries))
     report = []
     for data in datasets:
         scores = evaluate_retrieval(data, operators, tau=args.tau, operator_config=args.operator_config)

@@ -280,19 +280,23 @@ def _recorded_factory(recs: Sequence[Any]) -> Callable[[], Any]:
     return factory
 
 
-def suite_retrieval_data(suite: str | Path, vocab: Any, *, queries: Any = None) -> RetrievalData:
+def suite_retrieval_data(suite: str | Path, vocab: Any = None, *, queries: Any = None) -> RetrievalData:
     """Retrieval data from a simulated suite folder holding ``nodes.json``, ``events.jsonl`` and
     ``truth.json`` (docs/formats.md). The channel replays the events' recorded ``geometric``
     labels; geometric predicates use the nodes' precomputed ``geometric_predicates`` when present
-    and the registry otherwise. ``queries`` defaults to the vocabulary's dataset name."""
+    and the registry otherwise. ``vocab`` defaults to scannet for all-indoor suites, else kitti360;
+    ``queries`` defaults to the vocabulary's dataset name."""
     from sgbelief.eval.formats import read_events, read_nodes, read_truth
 
     suite = Path(suite)
     for f in ("nodes.json", "events.jsonl", "truth.json"):
         if not (suite / f).is_file():
             raise FileNotFoundError(f"simulated suite {suite}: missing {f}")
-    table = _load_vocab(vocab)
     nf = read_nodes(suite / "nodes.json")
+    if vocab is None:  # indoor suites use the ScanNet vocabulary, outdoor ones KITTI-360's
+        kinds = {sc.kind for sc in nf.scenes.values()}
+        vocab = "scannet" if kinds == {"indoor"} else "kitti360"
+    table = _load_vocab(vocab)
     nodes: dict[Any, dict[str, Any]] = {}
     for nid, info in nf.nodes.items():
         d = info.model_dump()
