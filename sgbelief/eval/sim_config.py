@@ -142,6 +142,11 @@ class Detector(_M):
     hallucination_predicates: dict[str, float]
     hallucination_offset: tuple[float, float] = Field(description="box shift in box widths")
     min_logged_mass: float = Field(ge=0, lt=1, description="masses below this are not logged")
+    ground_overlap_factor: float = Field(
+        default=1.0, ge=0, le=1,
+        description="overlap of a box with a flat ground element (road / sidewalk / floor strip) other than the "
+                    "box's own element, relative to its bounding-box IoU (the region's pixel mask is a thin wedge)",
+    )
     candidate_filter: dict[str, list[str]] | None = Field(
         default=None, description="predicate -> candidate true classes admitted at intake (indoor)"
     )
