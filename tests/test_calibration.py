@@ -108,3 +108,18 @@ def test_monotone_transform_leaves_knot_values_unchanged() -> None:
     np.testing.assert_allclose(np.array(sa.kx) ** 3, sb.kx, rtol=1e-9)
     for ci in c[:50]:
         assert a.likelihood_ratio(float(ci), "k", "p")[0] == pytest.approx(b.likelihood_ratio(float(ci) ** 3, "k", "p")[0], rel=1e-9)
+
+
+def test_lr_reference_uniform_keeps_the_calibrated_posterior_odds() -> None:
+    # a slice where every verified claim is correct: the confidence does not discriminate,
+    # so Eq. 2 with the slice's base rate gives Lambda = 1, the uniform reference p/(1-p) > 1
+    slice_ref = MondrianCalibrator(CalibrationConfig(lr_reference="slice"))
+    uniform = MondrianCalibrator(CalibrationConfig(lr_reference="uniform"))
+    for c in np.linspace(0.3, 0.99, 60):
+        slice_ref.add("k", "p", float(c), 1)
+        uniform.add("k", "p", float(c), 1)
+    assert slice_ref.likelihood_ratio(0.8, "k", "p")[0] == pytest.approx(1.0)
+    s = uniform.slices[("k", "p")]
+    eps = 0.5 / (s.n_fit + 1)
+    p = min(max(s.p_hat(0.8), eps), 1 - eps)
+    assert uniform.likelihood_ratio(0.8, "k", "p")[0] == pytest.approx(p / (1 - p))

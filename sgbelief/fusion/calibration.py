@@ -98,11 +98,13 @@ class CalibrationSlice:
             return y1
         return y0 + (y1 - y0) * (c - x0) / (x1 - x0)
 
-    def log_lr(self, c: float) -> float:
-        """log Lambda_hat(c) of Eq. 2 (unclipped in magnitude only by the eps-clipping of p_hat)."""
+    def log_lr(self, c: float, reference: bool = True) -> float:
+        """log Lambda_hat(c) of Eq. 2; ``reference=False`` keeps the calibrated posterior odds
+        (base rate not divided out: odds against the uniform Beta(1, 1) prior)."""
         eps = 0.5 / (self.n_fit + 1)
         p = min(max(self.p_hat(c), eps), 1.0 - eps)
-        return math.log(p / (1.0 - p)) - self.log_prior_odds
+        lo = math.log(p / (1.0 - p))
+        return lo - self.log_prior_odds if reference else lo
 
 
 class MondrianCalibrator:
@@ -113,6 +115,7 @@ class MondrianCalibrator:
         self.alpha = alpha
         self.slices: dict[tuple[str, str], CalibrationSlice] = {}
         self._log_lr_max = math.log(self.config.lr_max)
+        self._ref = self.config.lr_reference == "slice"
         self.frozen = False
 
     # ------------------------------------------------------------------ data
@@ -173,13 +176,14 @@ class MondrianCalibrator:
             lam = cc / (1.0 - cc)
             lo = 1.0 / cfg.lr_max
             return (lo if lam < lo else cfg.lr_max if lam > cfg.lr_max else lam), kappa
-        log_lr = g.log_lr(c)  # type: ignore[union-attr]
+        ref = self._ref
+        log_lr = g.log_lr(c, ref)  # type: ignore[union-attr]
         if n_p:
             lp = min(1.0, n_p / target)
-            log_lr = lp * p.log_lr(c) + (1.0 - lp) * log_lr  # type: ignore[union-attr]
+            log_lr = lp * p.log_lr(c, ref) + (1.0 - lp) * log_lr  # type: ignore[union-attr]
         if n_s:
             ls = min(1.0, n_s / target)
-            log_lr = ls * s.log_lr(c) + (1.0 - ls) * log_lr  # type: ignore[union-attr]
+            log_lr = ls * s.log_lr(c, ref) + (1.0 - ls) * log_lr  # type: ignore[union-attr]
         m = self._log_lr_max
         if log_lr > m:
             log_lr = m

@@ -24,6 +24,10 @@ class CalibrationConfig(_Frozen):
     refit_growth: float = Field(0.1, gt=0.0, description="refit after the slice grew by this fraction")
     min_refit: int = Field(8, ge=1, description="... or by at least this many outcomes")
     cold_start: Literal["raw", "neutral"] = "raw"
+    lr_reference: Literal["slice", "uniform"] = Field(
+        "slice",
+        description="odds Lambda_hat is measured against: the slice's base rate (Eq. 2) or the uniform prior Beta(1, 1)",
+    )
     adaptive_gamma: float = Field(0.005, ge=0.0, lt=1.0, description="adaptive conformal step size")
 
 
