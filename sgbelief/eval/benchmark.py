@@ -1,0 +1,432 @@
+"""``sgbelief bench``: reproduce the paper's tables on the simulated suites and on real detector scores.
+
+For each suite (outdoor = KITTI-360-like, indoor = ScanNet-like) the seeded simulator produces one
+claim stream with two confidence profiles (vlm_a, vlm_b) and two geometric channels (oracle,
+segmenter). The six operators replay the stream and are scored on the end-of-stream map:
+
+- Table 2: per-class IoU at tau = 0.5 (vlm_a, oracle channel);
+- Table 5: comod with the oracle vs the segmenter channel (IoU / precision / recall, ⊥ rate);
+- cross-VLM invariance: Brier score under vlm_a and vlm_b, and its change;
+- calibration: raw vs calibrated ECE on a 50/50 split of the verified claims, conformal coverage;
+- an ablation of the likelihood-ratio reference (``calibration.lr_reference``: slice vs uniform);
+- compound-query retrieval F1 per operator (Table 3 full-pool columns);
+- real detector confidences (COCO): per-class isotonic calibration, ECE, coverage (Fig. 1b).
+
+Figures: reliability diagrams, the single-element trace of cal vs comod on a contradicted element
+and the final Beta posteriors (Fig. 1 a-c).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sgbelief.eval.formats import EventRecord
+from sgbelief.eval.metrics import conformal_coverage, reliability_bins
+from sgbelief.eval.replay import OperatorScores, make_runs, replay, score_run, to_event
+from sgbelief.fusion.calibration import MondrianCalibrator
+from sgbelief.fusion.compatibility import SubsumptionTable
+from sgbelief.fusion.config import OperatorConfig
+from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator
+from sgbelief.graph.belief import BetaBelief
+from sgbelief.graph.persistence import atomic_write_text
+from sgbelief.graph.scene_graph import SceneGraph
+
+
+@dataclass(frozen=True)
+class SuiteSpec:
+    name: str
+    vocab: str
+    predicates: tuple[str, ...]
+    title: str
+
+
+SUITES: dict[str, SuiteSpec] = {
+    "outdoor": SuiteSpec("outdoor", "kitti360", ("is_car", "is_pedestrian", "is_traffic_sign"), "KITTI-360-like (simulated)"),
+    "indoor": SuiteSpec("indoor", "scannet", ("is_chair", "is_bookshelf", "is_table_or_desk"), "ScanNet-like (simulated)"),
+}
+
+Progress = Callable[[str], None]
+
+
+def _noop(_: str) -> None:
+    pass
+
+
+# ----------------------------------------------------------------------------- replays
+def _run(
+    events: Sequence[EventRecord], operators: Sequence[str], table: SubsumptionTable, truth: dict, preds: Sequence[str],
+    config: OperatorConfig,
+) -> dict[str, OperatorScores]:
+    runs = make_runs(operators, table, config)
+    replay(events, runs)
+    return {r.name: score_run(r, truth, preds, tau=config.tau) for r in runs}
+
+
+def _bot_rate(sc: OperatorScores) -> float:
+    s = sc.stats
+    decided = s.get("targets", 0) - s.get("below_tau_t", 0)
+    return s.get("refused", 0) / decided if decided else math.nan
+
+
+def _scores_dict(scores: dict[str, OperatorScores]) -> dict[str, Any]:
+    return {k: v.as_dict() for k, v in scores.items()}
+
+
+# ------------------------------------------------------------------------ calibration
+def _verified_claims(events: Sequence[EventRecord], table: SubsumptionTable, preds: Sequence[str]) -> tuple[np.ndarray, ...]:
+    """(confidence, outcome, context, predicate) of every claim the geometric channel verified."""
+    c, y, k, p = [], [], [], []
+    for rec in events:
+        if rec.predicate not in preds:
+            continue
+        for node, mass in rec.targets.items():
+            out = table.outcome(rec.predicate, rec.geometric.get(node))
+            if out is not None and mass > 0.1:
+                c.append(rec.confidence), y.append(out), k.append(rec.context), p.append(rec.predicate)
+                break
+    return np.array(c, float), np.array(y, int), np.array(k, object), np.array(p, object)
+
+
+def calibration_split(
+    c: np.ndarray, y: np.ndarray, keys: Sequence[tuple[str, str]], *, seed: int, alpha: float = 0.1,
+) -> dict[str, Any]:
+    """Fit the Mondrian isotonic calibrator on a random half, evaluate raw vs calibrated on the other half."""
+    rng = np.random.default_rng(seed)
+    perm = rng.permutation(len(c))
+    fit, ev = perm[: len(c) // 2], perm[len(c) // 2 :]
+    cal = MondrianCalibrator(alpha=alpha)
+    for i in fit:
+        cal.add(keys[i][0], keys[i][1], float(c[i]), int(y[i]))
+    cal.refit_all()
+    p_cal = np.array([cal.calibrated_probability(float(c[i]), *keys[i]) for i in ev])
+    raw_bins = reliability_bins(c[ev], y[ev])
+    cal_bins = reliability_bins(p_cal, y[ev])
+    sets = [cal.prediction_set(float(c[i]), *keys[i]).labels for i in ev]
+    cov = conformal_coverage(sets, y[ev])
+    return {
+        "n_fit": int(len(fit)),
+        "n_eval": int(len(ev)),
+        "raw_ece": raw_bins.ece,
+        "calibrated_ece": cal_bins.ece,
+        "coverage": cov.coverage,
+        "mean_set_size": cov.mean_set_size,
+        "alpha": alpha,
+        "_bins": (raw_bins, cal_bins),
+    }
+
+
+def real_detector_report(seed: int, alpha: float = 0.1) -> dict[str, Any]:
+    """Per-class isotonic calibration of real COCO detector scores (netcal records), 50/50 split by image."""
+    from sgbelief.eval.detector_records import load_detector_records, split_half
+
+    out: dict[str, Any] = {}
+    for name in ("rfcn-resnet-101-iou-0.60", "ssd-resnet-50-v1-iou-0.60"):
+        rec = load_detector_records(name)
+        a, b = split_half(rec, seed)
+        c = np.concatenate([a.score, b.score]).astype(float)
+        y = np.concatenate([a.matched, b.matched]).astype(int)
+        keys = [(name, str(int(k))) for k in np.concatenate([a.class_id, b.class_id])]
+        # split_half already separated images: fit on the first block, evaluate on the second
+        n_a = len(a.score)
+        cal = MondrianCalibrator(alpha=alpha)
+        for i in range(n_a):
+            cal.add(keys[i][0], keys[i][1], float(c[i]), int(y[i]))
+        cal.refit_all()
+        ev = np.arange(n_a, len(c))
+        p_cal = np.array([cal.calibrated_probability(float(c[i]), *keys[i]) for i in ev])
+        raw_bins, cal_bins = reliability_bins(c[ev], y[ev]), reliability_bins(p_cal, y[ev])
+        sets = [cal.prediction_set(float(c[i]), *keys[i]).labels for i in ev]
+        cov = conformal_coverage(sets, y[ev])
+        out[name] = {
+            "n_fit": int(n_a), "n_eval": int(len(ev)), "raw_ece": raw_bins.ece, "calibrated_ece": cal_bins.ece,
+            "coverage": cov.coverage, "mean_set_size": cov.mean_set_size, "alpha": alpha, "_bins": (raw_bins, cal_bins),
+        }
+    return out
+
+
+# ------------------------------------------------------------------------------ trace
+def _contradicted_pair(events: Sequence[EventRecord], table: SubsumptionTable, truth: dict, preds: Sequence[str]) -> tuple[str, str] | None:
+    """The (node, predicate) with ground truth 0 that the model asserts most often against the geometry."""
+    counts: dict[tuple[str, str], int] = {}
+    for rec in events:
+        if rec.predicate not in preds or rec.confidence < 0.5:
+            continue
+        for node, mass in rec.targets.items():
+            if mass > 0.5 and truth.get(node, {}).get(rec.predicate) == 0 and table.outcome(rec.predicate, rec.geometric.get(node)) == 0:
+                counts[(node, rec.predicate)] = counts.get((node, rec.predicate), 0) + 1
+    return max(counts, key=counts.__getitem__) if counts else None
+
+
+def element_trace(
+    events: Sequence[EventRecord], table: SubsumptionTable, pair: tuple[str, str], config: OperatorConfig,
+) -> dict[str, Any]:
+    """Posterior mean and 90 % interval of one (node, predicate) after each event that targets it."""
+    node, pred = pair
+    ops = {name: make_operator(name, config, table) for name in ("cal", "comod")}
+    graphs = {name: SceneGraph() for name in ops}
+    trace: dict[str, list] = {name: [] for name in ops}
+    contradictions: list[int] = []
+    k = 0
+    for i, rec in enumerate(events):
+        ev, labels = to_event(rec, f"e{i}")
+        for name, op in ops.items():
+            op.update(graphs[name], ev, labels)
+        if rec.predicate == pred and rec.targets.get(node, 0.0) > config.tau_t:
+            k += 1
+            if table.verdict(pred, rec.geometric.get(node), rec.confidence).value == "contradicts":
+                contradictions.append(k)
+            for name in ops:
+                b = graphs[name].provenance.belief(node, pred)
+                lo, hi = b.interval(0.9)
+                trace[name].append((k, b.mean, lo, hi))
+    final = {name: graphs[name].provenance.alpha_beta(node, pred) for name in ops}
+    return {"node": node, "predicate": pred, "events": k, "contradictions": contradictions, "trace": trace, "final": final}
+
+
+# ---------------------------------------------------------------------------- figures
+def _plot_reliability(ax: Any, raw: Any, cal: Any, title: str) -> None:
+    ax.plot([0, 1], [0, 1], ls="--", color="0.6", lw=1)
+    for bins, color, label in ((raw, "#7b3fa0", f"raw (ECE {raw.ece:.3f})"), (cal, "#f0745a", f"calibrated (ECE {cal.ece:.3f})")):
+        m = bins.counts > 0
+        ax.plot(bins.mean_confidence[m], bins.accuracy[m], marker="o", color=color, label=label)
+    ax.set_xlabel("confidence / calibrated probability")
+    ax.set_ylabel("observed frequency")
+    ax.set_xlim(0, 1), ax.set_ylim(0, 1)
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, loc="upper left")
+
+
+def make_figures(results: dict[str, Any], out: Path, real: dict[str, Any], sim_cal: dict[str, Any], traces: dict[str, Any]) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy import stats
+
+    paths: list[Path] = []
+    # Figure 1: (a) trace, (b) reliability, (c) final posteriors
+    suite = next((s for s in ("outdoor", "indoor") if traces.get(s)), None)
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    if suite is not None:
+        tr = traces[suite]
+        for name, color in (("cal", "#3f7fbf"), ("comod", "#d9534f")):
+            arr = np.array(tr["trace"][name])
+            axes[0].plot(arr[:, 0], arr[:, 1], color=color, label=f"{name}: mean")
+            axes[0].fill_between(arr[:, 0], arr[:, 2], arr[:, 3], color=color, alpha=0.2, label=f"{name}: 90% interval")
+        for k in tr["contradictions"]:
+            axes[0].axvline(k, color="0.85", lw=0.6, zorder=0)
+        axes[0].axhline(0.5, color="0.5", ls=":", lw=1)
+        axes[0].set_ylim(0, 1)
+        axes[0].set_xlabel(f"event at {tr['node']} ({tr['predicate']}); grey = geometric contradiction")
+        axes[0].set_ylabel("posterior mean (truth: 0)")
+        axes[0].set_title(f"(a) {tr['events']} events, {len(tr['contradictions'])} contradicted", fontsize=9)
+        axes[0].legend(fontsize=7)
+        xs = np.linspace(0.001, 0.999, 400)
+        for name, color in (("cal", "#3f7fbf"), ("comod", "#d9534f")):
+            a, b = tr["final"][name]
+            axes[2].plot(xs, stats.beta(a, b).pdf(xs), color=color, label=f"{name}: Beta({a:.1f}, {b:.1f}), mean {a / (a + b):.2f}")
+        axes[2].axvline(0.0, color="k", lw=2)
+        axes[2].set_xlabel("P(predicate)")
+        axes[2].set_title("(c) final Beta posteriors (truth 0)", fontsize=9)
+        axes[2].legend(fontsize=7)
+    raw, cal = next(iter(real.values()))["_bins"] if real else sim_cal[next(iter(sim_cal))]["_bins"]
+    _plot_reliability(axes[1], raw, cal, f"(b) reliability, real detector ({next(iter(real)) if real else 'sim'}), held-out half")
+    fig.tight_layout()
+    p = out / "figure1.png"
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    paths.append(p)
+    # reliability diagrams for every calibration source
+    sources = [(f"sim {k}", v) for k, v in sim_cal.items()] + [(f"real {k}", v) for k, v in real.items()]
+    fig, axes = plt.subplots(1, len(sources), figsize=(4 * len(sources), 3.8), squeeze=False)
+    for ax, (title, rep) in zip(axes[0], sources):
+        _plot_reliability(ax, *rep["_bins"], title)
+    fig.tight_layout()
+    p = out / "reliability.png"
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    paths.append(p)
+    return paths
+
+
+# ----------------------------------------------------------------------------- driver
+def run_bench(
+    suites: Sequence[str] = ("outdoor", "indoor"),
+    *,
+    seed: int = 0,
+    out: str | Path = "results/bench",
+    operators: Sequence[str] = OPERATOR_NAMES,
+    config: OperatorConfig | None = None,
+    fm_source: str | None = None,
+    scale: float | None = None,
+    retrieval: bool = True,
+    real_data: bool = True,
+    progress: Progress = _noop,
+) -> dict[str, Any]:
+    """Run the whole benchmark; writes results.json, results.md and figures into ``out``."""
+    from sgbelief.eval.simulate import simulate
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    config = config or OperatorConfig.default()
+    uniform = config.model_copy(update={"calibration": config.calibration.model_copy(update={"lr_reference": "uniform"})})
+    started = time.perf_counter()
+    results: dict[str, Any] = {"meta": {"seed": seed, "suites": list(suites), "operators": list(operators),
+                                        "python": platform.python_version(), "machine": platform.machine()},
+                               "suites": {}}
+    sim_cal: dict[str, Any] = {}
+    traces: dict[str, Any] = {}
+    for name in suites:
+        spec = SUITES[name]
+        progress(f"{name}: simulating")
+        suite = simulate(name, seed, fm_source=fm_source, scale=scale)
+        table = SubsumptionTable.shipped(spec.vocab)
+        preds = list(spec.predicates)
+        data_dir = out / "data" / name
+        suite.write(data_dir, profile="vlm_a", channel="oracle")
+        ev_a = suite.events_for("vlm_a", "oracle")
+        res: dict[str, Any] = {"title": spec.title, "events": len(ev_a), "sim_stats": _jsonable(suite.stats)}
+        progress(f"{name}: six operators, vlm_a + oracle channel ({len(ev_a)} events)")
+        main = _run(ev_a, operators, table, suite.truth, preds, config)
+        res["table2"] = _scores_dict(main)
+        progress(f"{name}: six operators, vlm_b (confidence swap)")
+        swap = _run(suite.events_for("vlm_b", "oracle"), operators, table, suite.truth, preds, config)
+        res["vlm_swap"] = {op: {"brier_vlm_a": main[op].brier, "brier_vlm_b": swap[op].brier,
+                                "delta": swap[op].brier - main[op].brier,
+                                "mean_iou_vlm_a": main[op].mean_iou, "mean_iou_vlm_b": swap[op].mean_iou}
+                           for op in operators}
+        progress(f"{name}: comod with the segmenter channel")
+        seg = _run(suite.events_for("vlm_a", "segmenter"), ["comod"], table, suite.truth, preds, config)
+        res["table5"] = {"oracle": main["comod"].as_dict(), "segmenter": seg["comod"].as_dict(),
+                         "bot_rate_oracle": _bot_rate(main["comod"]), "bot_rate_segmenter": _bot_rate(seg["comod"]),
+                         "segmenter_miou": suite.stats.get("segmenter_miou")}
+        progress(f"{name}: ablation lr_reference=uniform")
+        abl = _run(ev_a, [o for o in ("cal", "comod") if o in operators], table, suite.truth, preds, uniform)
+        res["ablation_uniform"] = _scores_dict(abl)
+        c, y, k, p = _verified_claims(ev_a, table, preds)
+        if len(c) > 20:
+            sim_cal[name] = calibration_split(c, y, list(zip(k, p)), seed=seed, alpha=config.alpha)
+            res["calibration"] = {kk: v for kk, v in sim_cal[name].items() if not kk.startswith("_")}
+        pair = _contradicted_pair(ev_a, table, suite.truth, preds)
+        if pair is not None:
+            progress(f"{name}: trace of contradicted element {pair}")
+            traces[name] = element_trace(ev_a, table, pair, config)
+            res["trace"] = {k2: v for k2, v in traces[name].items() if k2 != "trace"}
+        if retrieval:
+            progress(f"{name}: compound-query retrieval")
+            try:
+                from sgbelief.query.retrieval import evaluate_retrieval, suite_retrieval_data
+
+                rdata = suite_retrieval_data(data_dir, spec.vocab)
+                scores = evaluate_retrieval(rdata, operators, operator_config=config)
+                res["retrieval"] = [s.to_dict() for s in scores]
+            except Exception as exc:  # reported, never silently dropped
+                res["retrieval_error"] = f"{type(exc).__name__}: {exc}"
+        results["suites"][name] = res
+    real: dict[str, Any] = {}
+    if real_data:
+        progress("real detector confidences: per-class calibration")
+        real = real_detector_report(seed, config.alpha)
+        results["real_calibration"] = {k: {kk: v for kk, v in r.items() if not kk.startswith("_")} for k, r in real.items()}
+    progress("figures")
+    figs = make_figures(results, out, real, sim_cal, traces)
+    results["figures"] = [str(p.name) for p in figs]
+    results["meta"]["seconds"] = time.perf_counter() - started
+    atomic_write_text(out / "results.json", json.dumps(_jsonable(results), indent=2))
+    atomic_write_text(out / "results.md", render_markdown(results))
+    return results
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items() if not str(k).startswith("_")}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, BetaBelief):
+        return [x.alpha, x.beta]
+    return x
+
+
+# --------------------------------------------------------------------------- markdown
+def _f(x: Any, d: int = 3) -> str:
+    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{d}f}"
+
+
+def render_markdown(results: dict[str, Any]) -> str:
+    lines = [f"# sgbelief bench (seed {results['meta']['seed']})", ""]
+    for name, res in results["suites"].items():
+        preds = list(SUITES[name].predicates)
+        short = [p.removeprefix("is_") for p in preds]
+        lines += [f"## {res['title']} — {res['events']} events", "",
+                  "### Per-class IoU at tau = 0.5 (Table 2 layout; vlm_a, oracle channel)", "",
+                  "| operator | " + " | ".join(short) + " | mean | Brier | ⊥ refusals |",
+                  "|---|" + "---|" * (len(short) + 3)]
+        for op, sc in res["table2"].items():
+            lines.append(f"| {op} | " + " | ".join(_f(sc["per_predicate"][p]["iou"]) for p in preds)
+                         + f" | {_f(sc['mean_iou'])} | {_f(sc['brier'], 4)} | {sc['refusals']} |")
+        t5 = res["table5"]
+        lines += ["", f"### comod: oracle vs segmenter channel (Table 5 layout; segmenter mIoU {_f(t5.get('segmenter_miou'))})", "",
+                  "| predicate | IoU oracle | P | R | IoU segmenter | P | R | ΔIoU |", "|---|---|---|---|---|---|---|---|"]
+        for p in preds:
+            o, s = t5["oracle"]["per_predicate"][p], t5["segmenter"]["per_predicate"][p]
+            lines.append(f"| {p} | {_f(o['iou'])} | {_f(o['precision'])} | {_f(o['recall'])} | {_f(s['iou'])} | "
+                         f"{_f(s['precision'])} | {_f(s['recall'])} | {_f(s['iou'] - o['iou'])} |")
+        lines.append(f"| mean | {_f(t5['oracle']['mean_iou'])} | | | {_f(t5['segmenter']['mean_iou'])} | | | "
+                     f"{_f(t5['segmenter']['mean_iou'] - t5['oracle']['mean_iou'])} |")
+        lines.append(f"\n⊥-emission rate: oracle {_f(t5['bot_rate_oracle'])}, segmenter {_f(t5['bot_rate_segmenter'])}")
+        lines += ["", "### Cross-VLM invariance: Brier under vlm_a → vlm_b (pairs with evidence)", "",
+                  "| operator | Brier vlm_a | Brier vlm_b | Δ | mean IoU vlm_a | mean IoU vlm_b |", "|---|---|---|---|---|---|"]
+        for op, v in res["vlm_swap"].items():
+            lines.append(f"| {op} | {_f(v['brier_vlm_a'], 4)} | {_f(v['brier_vlm_b'], 4)} | {v['delta']:+.4f} | "
+                         f"{_f(v['mean_iou_vlm_a'])} | {_f(v['mean_iou_vlm_b'])} |")
+        if "ablation_uniform" in res:
+            lines += ["", "### Ablation: likelihood-ratio reference `calibration.lr_reference: uniform`", "",
+                      "| operator | " + " | ".join(short) + " | mean | Brier |", "|---|" + "---|" * (len(short) + 2)]
+            for op, sc in res["ablation_uniform"].items():
+                lines.append(f"| {op} (uniform) | " + " | ".join(_f(sc["per_predicate"][p]["iou"]) for p in preds)
+                             + f" | {_f(sc['mean_iou'])} | {_f(sc['brier'], 4)} |")
+        if "calibration" in res:
+            c = res["calibration"]
+            lines += ["", f"### Calibration of verified claims (50/50 split, n_eval = {c['n_eval']})", "",
+                      f"raw ECE {_f(c['raw_ece'])} → calibrated ECE {_f(c['calibrated_ece'])}; conformal coverage "
+                      f"{_f(c['coverage'])} at 1 − α = {1 - c['alpha']:.2f}, mean set size {_f(c['mean_set_size'])}"]
+        if "trace" in res:
+            t = res["trace"]
+            fin = {k: v[0] / (v[0] + v[1]) for k, v in t["final"].items()}
+            lines += ["", f"Contradicted element {t['node']} / {t['predicate']}: {t['events']} events, "
+                      f"{len(t['contradictions'])} geometric contradictions; final mean cal {fin['cal']:.3f}, comod {fin['comod']:.3f} (truth 0)."]
+        if "retrieval" in res:
+            lines += ["", "### Compound-query retrieval, full pool (Table 3 layout): F1 at p ≥ 0.5", ""]
+            ops = list(dict.fromkeys(r["operator"] for r in res["retrieval"]))
+            lines += ["| compound | n | pos % | " + " | ".join(ops) + " |", "|---|---|---|" + "---|" * len(ops)]
+            by = {}
+            for r in res["retrieval"]:
+                by.setdefault(r["title"] or r["query"], {})[r["operator"]] = r
+            for q, row in by.items():
+                first = next(iter(row.values()))
+                lines.append(f"| {q} | {first['n']} | {100 * first['pos_rate']:.1f} | "
+                             + " | ".join(_f(row[o]["f1"]) if o in row else "–" for o in ops) + " |")
+        elif "retrieval_error" in res:
+            lines += ["", f"Retrieval table not produced: {res['retrieval_error']}"]
+        lines.append("")
+    if "real_calibration" in results:
+        lines += ["## Real detector confidences (COCO val, netcal records; per-class isotonic, 50/50 split by image)", "",
+                  "| detector | n eval | raw ECE | calibrated ECE | coverage (1 − α = 0.9) | mean set size |", "|---|---|---|---|---|---|"]
+        for k, r in results["real_calibration"].items():
+            lines.append(f"| {k} | {r['n_eval']} | {_f(r['raw_ece'])} | {_f(r['calibrated_ece'])} | {_f(r['coverage'])} | {_f(r['mean_set_size'])} |")
+    lines += ["", f"Figures: {', '.join(results.get('figures', []))}. Total time {results['meta'].get('seconds', 0):.1f} s.", ""]
+    return "\n".join(lines)
