@@ -34,6 +34,7 @@ import numpy as np
 from sgbelief.fusion.config import CalibrationConfig
 from sgbelief.fusion.conformal import (
     ConformalSlice,
+    merge_sorted,
     PredictionSet,
     no_coverage,
     nonconformity,
@@ -43,14 +44,46 @@ from sgbelief.fusion.conformal import (
 _GLOBAL = ("*", "*")
 
 
-class CalibrationSlice:
-    """The outcomes of one Mondrian slice and its current isotonic fit."""
+def _isotonic_knots(x_sorted: np.ndarray, y_sorted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The knots scikit-learn's ``IsotonicRegression(y_min=0, y_max=1).fit`` keeps, for data
+    already sorted by x, without its per-call validation overhead.
 
-    __slots__ = ("c", "y", "n", "n_pos", "n_fit", "kx", "ky", "base_rate", "log_prior_odds", "conformal")
+    Same steps as ``IsotonicRegression._build_y``: average y over duplicate x (sklearn's own
+    ``_make_unique``), weighted pool-adjacent-violators (``scipy.optimize.isotonic_regression``,
+    which scikit-learn itself calls), clip to [0, 1], drop interior points of constant runs.
+    Falls back to the public estimator if those internals move.
+    """
+    try:
+        from scipy.optimize import isotonic_regression
+        from sklearn._isotonic import _make_unique
+    except ImportError:  # pragma: no cover - other library versions
+        from sklearn.isotonic import IsotonicRegression
+
+        iso = IsotonicRegression(increasing=True, y_min=0.0, y_max=1.0, out_of_bounds="clip").fit(x_sorted, y_sorted)
+        return iso.X_thresholds_, iso.y_thresholds_
+    ux, uy, uw = _make_unique(x_sorted, y_sorted, np.ones_like(x_sorted))
+    fit = np.asarray(isotonic_regression(uy, weights=uw, increasing=True).x, dtype=np.float64)
+    np.clip(fit, 0.0, 1.0, fit)
+    keep = np.ones(len(fit), dtype=bool)
+    keep[1:-1] = np.logical_or(np.not_equal(fit[1:-1], fit[:-2]), np.not_equal(fit[1:-1], fit[2:]))
+    return ux[keep], fit[keep]
+
+
+class CalibrationSlice:
+    """The outcomes of one Mondrian slice and its current isotonic fit.
+
+    Outcomes added since the last fit wait in ``c`` / ``y`` (arrival order); a refit merges them
+    into the x-sorted arrays ``sx`` / ``sy`` (one sort of the new outcomes plus a linear merge,
+    so a refit costs O(n + k log k) instead of re-sorting the whole buffer).
+    """
+
+    __slots__ = ("c", "y", "sx", "sy", "n", "n_pos", "n_fit", "kx", "ky", "base_rate", "log_prior_odds", "conformal")
 
     def __init__(self, alpha: float) -> None:
         self.c = array("d")
         self.y = array("b")
+        self.sx: np.ndarray = np.empty(0, dtype=np.float64)
+        self.sy: np.ndarray = np.empty(0, dtype=np.int8)
         self.n = 0
         self.n_pos = 0
         self.n_fit = 0
@@ -65,18 +98,19 @@ class CalibrationSlice:
         self.y.append(y)
         self.n += 1
         self.n_pos += y
-        self.conformal.scores.append(nonconformity(c, y))
+        self.conformal.pending.append(nonconformity(c, y))
 
     def refit(self) -> None:
-        """Fit p_hat(y=1 | c) by isotonic regression on the whole slice (scikit-learn)."""
-        from sklearn.isotonic import IsotonicRegression
-
-        x = np.frombuffer(self.c, dtype=np.float64)[: self.n]
-        yy = np.frombuffer(self.y, dtype=np.int8)[: self.n].astype(np.float64)
-        iso = IsotonicRegression(increasing=True, y_min=0.0, y_max=1.0, out_of_bounds="clip")
-        iso.fit(x, yy)
-        self.kx = iso.X_thresholds_.tolist()
-        self.ky = iso.y_thresholds_.tolist()
+        """Fit p_hat(y=1 | c) by isotonic regression on the whole slice (= scikit-learn's fit)."""
+        if self.c:
+            new_c = np.frombuffer(self.c, dtype=np.float64)
+            new_y = np.frombuffer(self.y, dtype=np.int8)
+            self.sx, self.sy = merge_sorted(self.sx, new_c, (self.sy, new_y))
+            self.c = array("d")
+            self.y = array("b")
+        kx, ky = _isotonic_knots(self.sx, self.sy.astype(np.float64))
+        self.kx = kx.tolist()
+        self.ky = ky.tolist()
         self.n_fit = self.n
         eps = 0.5 / (self.n + 1)
         pi = min(max(self.n_pos / self.n, eps), 1.0 - eps)

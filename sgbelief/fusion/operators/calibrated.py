@@ -156,8 +156,8 @@ class CalibratedOperator(BaseOperator):
         sl = self.pair_conformal_.get(predicate)
         if sl is None:
             sl = self.pair_conformal_[predicate] = ConformalSlice(self.config.alpha)
-        sl.scores.append(nonconformity(p, y))
-        n = len(sl.scores)
+        sl.pending.append(nonconformity(p, y))
+        n = sl.n_sorted + len(sl.pending)
         cfg = self.config.calibration
         if n - sl.n_sorted >= max(cfg.min_refit, cfg.refit_growth * sl.n_sorted) or sl.n_sorted == 0:
             sl.refresh()
