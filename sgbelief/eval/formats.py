@@ -20,14 +20,13 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, NamedTuple
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from sgbelief.graph.persistence import atomic_write_text
 from sgbelief.errors import FormatError
 
 EVENTS_FORMAT = "sgbelief.events"
@@ -403,24 +402,6 @@ def event_to_json(record: EventRecord | Mapping[str, Any]) -> str:
     return json.dumps(d, separators=(",", ":"), allow_nan=False, ensure_ascii=False)
 
 
-def _atomic_write_text(path: str | os.PathLike[str], chunks: Iterable[str]) -> None:
-    """Write text via a temporary file in the same directory, then ``os.replace``."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            for chunk in chunks:
-                fh.write(chunk)
-        os.replace(tmp, p)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-
-
 def write_events(
     path: str | os.PathLike[str],
     records: Iterable[EventRecord | Mapping[str, Any]],
@@ -447,7 +428,7 @@ def write_events(
             count += 1
             yield event_to_json(obj) + "\n"
 
-    _atomic_write_text(path, chunks())
+    atomic_write_text(path, chunks())
     return count
 
 
@@ -501,7 +482,7 @@ def write_truth(path: str | os.PathLike[str], truth: Mapping[str, Mapping[str, i
         doc[str(node)] = {str(p): int(y) for p, y in preds.items()}
         if any(y not in (0, 1) for y in doc[str(node)].values()):
             raise FormatError(f"field '{node}': truth values must be 0 or 1", path=path)
-    _atomic_write_text(path, [json.dumps(doc, separators=(",", ":")), "\n"])
+    atomic_write_text(path, [json.dumps(doc, separators=(",", ":")), "\n"])
 
 
 # --------------------------------------------------------------------------- nodes.json
@@ -523,4 +504,4 @@ def read_nodes(path: str | os.PathLike[str]) -> NodesFile:
 def write_nodes(path: str | os.PathLike[str], nodes: NodesFile | Mapping[str, Any]) -> None:
     """Write ``nodes.json`` atomically (validated first)."""
     doc = nodes if isinstance(nodes, NodesFile) else NodesFile.model_validate(nodes)
-    _atomic_write_text(path, [doc.model_dump_json(exclude_none=False), "\n"])
+    atomic_write_text(path, [doc.model_dump_json(exclude_none=False), "\n"])

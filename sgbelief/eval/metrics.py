@@ -198,13 +198,13 @@ def expected_calibration_error(confidences: ArrayLike, outcomes: ArrayLike, n_bi
 
 
 def conformal_quantile(scores: ArrayLike, alpha: float) -> float:
-    """Split-conformal threshold: the ceil((n+1)(1-alpha))-th smallest score (inf if that exceeds n)."""
-    s = np.sort(np.asarray(scores, dtype=float).ravel())
-    n = s.size
-    k = math.ceil((n + 1) * (1.0 - alpha))
-    if n == 0 or k > n:
-        return math.inf
-    return float(s[max(k, 1) - 1])
+    """Split-conformal threshold: the ceil((n+1)(1-alpha))-th smallest score (inf if that exceeds n).
+
+    Same rule as the operators use (:func:`sgbelief.fusion.conformal.conformal_quantile`).
+    """
+    from sgbelief.fusion.conformal import conformal_quantile as _quantile
+
+    return _quantile(np.sort(np.asarray(scores, dtype=float).ravel()), alpha)
 
 
 def nll_prediction_sets(probabilities: ArrayLike, qhat: float, eps: float = 1e-12) -> list[frozenset[int]]:
