@@ -256,13 +256,33 @@ def _read_json(path: Path) -> Any:
         raise FormatError(f"invalid JSON: {exc.msg}", path=path, line=exc.lineno) from None
 
 
+def read_axis_alignment(path: str | Path) -> np.ndarray | None:
+    """The 4x4 ``axisAlignment`` matrix of a scene's ``<sceneId>.txt`` metadata (row-major), or None."""
+    p = Path(path)
+    if not p.is_file():
+        return None
+    for lineno, line in enumerate(p.read_text(encoding="utf-8", errors="replace").splitlines(), start=1):
+        key, sep, value = line.partition("=")
+        if sep and key.strip() == "axisAlignment":
+            try:
+                vals = [float(x) for x in value.split()]
+            except ValueError:
+                raise FormatError("field 'axisAlignment': expected 16 numbers", path=p, line=lineno) from None
+            if len(vals) != 16 or not np.all(np.isfinite(vals)):
+                raise FormatError(f"field 'axisAlignment': expected 16 finite numbers, got {len(vals)}", path=p, line=lineno)
+            return np.asarray(vals, dtype=float).reshape(4, 4)
+    return None
+
+
 def load_scene(scene_dir: str | Path, labels: LabelMap | str | Path | None = None, *,
-               scene_id: str | None = None, on_unknown_label: str = "error") -> ScanNetScene:
+               scene_id: str | None = None, on_unknown_label: str = "error", axis_align: bool = True) -> ScanNetScene:
     """Load a ScanNet v2 scene folder into ground-truth objects.
 
     ``labels``: a :class:`LabelMap` or the tsv path (default: found next to / above the folder).
     ``on_unknown_label``: 'error' (default) raises when an aggregation label is not a
     raw_category of the tsv; 'skip' drops such objects (listed in ``scene.skipped``).
+    ``axis_align``: apply the ``axisAlignment`` matrix of ``<sceneId>.txt`` when the folder has
+    one, so that boxes are axis-aligned in the gravity-aligned room frame (as ScanNet's own tools do).
     Raises FileNotFoundError for missing files and FormatError for malformed or inconsistent
     ones (e.g. segIndices length != mesh vertex count).
     """
@@ -282,6 +302,10 @@ def load_scene(scene_dir: str | Path, labels: LabelMap | str | Path | None = Non
     vertices = np.asarray(mesh.vertices, dtype=float)
     if vertices.ndim != 2 or len(vertices) == 0:
         raise FormatError("mesh has no vertices (unreadable or empty PLY)", path=files["mesh"])
+    if axis_align:
+        align = read_axis_alignment(Path(scene_dir) / f"{sid}.txt")
+        if align is not None:
+            vertices = vertices @ align[:3, :3].T + align[:3, 3]
 
     segs_doc = _read_json(files["segs"])
     if not isinstance(segs_doc, Mapping) or not isinstance(segs_doc.get("segIndices"), list):
