@@ -168,17 +168,27 @@ class MondrianCalibrator:
         if self.frozen:
             return
         cfg = self.config
+        gamma, alpha = cfg.adaptive_gamma, self.alpha
+        min_refit, growth = cfg.min_refit, cfg.refit_growth
+        score = nonconformity(c, y)  # Eq. 1, the same for the three levels
+        slices = self.slices
         for key in ((context, predicate), ("*", predicate), _GLOBAL):
-            s = self._slice(key)
-            if key[0] != "*" and s.n_fit > 0:
-                conf = s.conformal
+            s = slices.get(key)
+            if s is None:
+                s = slices[key] = CalibrationSlice(alpha)
+            conf = s.conformal
+            if s.n_fit > 0 and key[0] != "*":
                 q = conf.threshold(conf.alpha_t) if conf.alpha_t > 0 else math.inf
-                err = 0 if nonconformity(c, y) <= q else 1
+                err = 0 if score <= q else 1
                 conf.n_seen += 1
                 conf.n_err += err
-                conf.alpha_t += cfg.adaptive_gamma * (self.alpha - err)
-            s.add(c, y)
-            if s.n - s.n_fit >= max(cfg.min_refit, cfg.refit_growth * s.n_fit) or s.n_fit == 0:
+                conf.alpha_t += gamma * (alpha - err)
+            s.c.append(c)
+            s.y.append(y)
+            s.n += 1
+            s.n_pos += y
+            conf.pending.append(score)
+            if s.n - s.n_fit >= max(min_refit, growth * s.n_fit) or s.n_fit == 0:
                 s.refit()
 
     def refit_all(self) -> None:

@@ -8,11 +8,15 @@ from dataclasses import dataclass
 import numpy as np
 
 _EPS = 1e-12
+_ONE_MINUS_EPS = 1.0 - _EPS
 
 
 def nonconformity(c: float, y: int) -> float:
     """Eq. 1: s(e, y) = -y log c - (1 - y) log(1 - c), the model's negative log-likelihood of y."""
-    c = min(max(c, _EPS), 1.0 - _EPS)
+    if c < _EPS:
+        c = _EPS
+    elif c > _ONE_MINUS_EPS:
+        c = _ONE_MINUS_EPS
     return -math.log(c) if y == 1 else -math.log(1.0 - c)
 
 

@@ -53,6 +53,11 @@ COUNTED: frozenset[EntryStatus] = frozenset(
 PENDING: frozenset[EntryStatus] = frozenset({EntryStatus.REFUSED, EntryStatus.QUARANTINED})
 
 _STATUS_BY_VALUE = {s.value: s for s in EntryStatus}
+_COMMITTED = EntryStatus.COMMITTED
+_COMPACTED = EntryStatus.COMPACTED
+#: the same sets keyed by identity (hashing a str-Enum member runs Python code)
+_COUNTED_IDS = frozenset(id(s) for s in COUNTED)
+_PENDING_IDS = frozenset(id(s) for s in PENDING)
 
 
 class ProvenanceEntry:
@@ -248,7 +253,8 @@ class ProvenanceStore:
             log = self._pairs[key] = _PairLog(self.prior_alpha, self.prior_beta)
         entry = ProvenanceEntry(event_id, t, d_alpha, d_beta, status, node, predicate, stance)
         log.entries.append(entry)
-        if status in COUNTED:
+        # identity test first: hashing a str-Enum member for a frozenset lookup is slow
+        if status is _COMMITTED or status in COUNTED:
             log.alpha += d_alpha
             log.beta += d_beta
         elif status in PENDING:
@@ -399,16 +405,19 @@ class ProvenanceStore:
         keep: list[ProvenanceEntry] = []
         fold: list[ProvenanceEntry] = []
         bucket: ProvenanceEntry | None = None
+        pending_ids = _PENDING_IDS
         for entry in log.entries:
-            if entry.status is EntryStatus.COMPACTED:
+            st = entry.status
+            if st is _COMPACTED:
                 bucket = entry
-            elif entry.t < before_t and entry.status not in PENDING:
+            elif entry.t < before_t and id(st) not in pending_ids:
                 fold.append(entry)
             else:
                 keep.append(entry)
         if not fold:
             return 0
-        counted = [e for e in fold if e.status in COUNTED]
+        counted_ids = _COUNTED_IDS
+        counted = [e for e in fold if id(e.status) in counted_ids]
         d_alpha = math.fsum(e.d_alpha for e in counted)
         d_beta = math.fsum(e.d_beta for e in counted)
         n = sum(e.n_folded for e in fold)

@@ -9,6 +9,7 @@ from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, resolve_config
 from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport
 from sgbelief.fusion import queues
+from sgbelief.graph.provenance import EntryStatus
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
@@ -18,6 +19,7 @@ if TYPE_CHECKING:  # pragma: no cover
 _NO_CLAIM = Verdict.NO_CLAIM
 _CORR = Verdict.CORROBORATES
 _CONTRA = Verdict.CONTRADICTS
+_COMMITTED = EntryStatus.COMMITTED
 
 
 class BaseOperator:
@@ -92,34 +94,67 @@ class BaseOperator:
         return _CORR if (y == 1) == (c >= 0.5) else _CONTRA
 
     def update(
-        self, graph: SceneGraph, event: EvidenceEvent, channel: GeometricChannel | None = None
+        self,
+        graph: SceneGraph,
+        event: EvidenceEvent,
+        channel: GeometricChannel | None = None,
+        *,
+        report: bool = True,
     ) -> UpdateReport:
-        """Apply one event with the subclass's increment rule (baselines ignore the verdict)."""
+        """Apply one event with the subclass's increment rule (baselines ignore the verdict).
+
+        ``report=False`` skips building the per-target outcomes (the returned report has
+        ``targets == ()``); the map, provenance and stats are the same either way.
+        """
         self._check(graph, event)
         resolutions = self.tick(graph, event.t) if event.t > graph.clock else []
         tau_t = self.config.tau_t
         prov = graph.provenance
+        record = prov.record
+        gnx = graph.nx
+        increment = self._increment
         pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
+        label_of = channel.label if channel is not None else None
+        verdict_of = self._verdict
+        # the default verdict rule, inlined: one table lookup per target
+        table = None
+        if type(self)._verdict is BaseOperator._verdict and self.vocabulary is not None:
+            table = self.vocabulary.outcome_tables().get(pred, {})
+        claim_pos = c >= 0.5
         outcomes = []
-        stats = self.stats
-        stats["events"] += 1
+        n_targets = n_below = n_committed = 0
         for node, mass in event.targets.items():
-            stats["targets"] += 1
-            label = channel.label(node, t) if channel is not None else None
-            verdict = self._verdict(label, pred, c)
+            n_targets += 1
+            label = label_of(node, t) if label_of is not None else None
+            if table is not None:
+                y = table.get(label) if label is not None else None
+                verdict = _NO_CLAIM if y is None else _CORR if (y == 1) == claim_pos else _CONTRA
+            else:
+                verdict = verdict_of(label, pred, c)
             if mass <= tau_t:
-                stats["below_tau_t"] += 1
-                outcomes.append(TargetOutcome(node, mass, verdict, Action.BELOW_THRESHOLD))
+                n_below += 1
+                if report:
+                    outcomes.append(TargetOutcome(node, mass, verdict, Action.BELOW_THRESHOLD))
                 continue
-            graph.ensure_node(node)
-            inc = self._increment(graph, node, pred, c, mass)
+            if node not in gnx:
+                graph.ensure_node(node)
+            inc = increment(graph, node, pred, c, mass)
             if inc is None:
-                outcomes.append(TargetOutcome(node, mass, verdict, Action.IGNORED))
+                if report:
+                    outcomes.append(TargetOutcome(node, mass, verdict, Action.IGNORED))
                 continue
             da, db = inc
-            prov.record(node, pred, eid, t, da, db, stance=1 if da > db else -1 if da < db else 0)
-            stats["committed"] += 1
-            outcomes.append(TargetOutcome(node, mass, verdict, Action.COMMITTED, da, db))
+            record(node, pred, eid, t, da, db, _COMMITTED, stance=1 if da > db else -1 if da < db else 0)
+            n_committed += 1
+            if report:
+                outcomes.append(TargetOutcome(node, mass, verdict, Action.COMMITTED, da, db))
+        stats = self.stats
+        stats["events"] += 1
+        stats["targets"] += n_targets
+        if n_below:
+            stats["below_tau_t"] += n_below
+        if n_committed:
+            stats["committed"] += n_committed
         return UpdateReport(eid, t, pred, tuple(outcomes), tuple(resolutions))
 
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float] | None:

@@ -20,8 +20,12 @@ class OverwriteOperator(BaseOperator):
 
     name = "overwrite"
 
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._strength = self.config.baselines.overwrite.strength
+
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
-        s = self.config.baselines.overwrite.strength
+        s = self._strength
         prov = graph.provenance
         a, b = prov.alpha_beta(node, predicate)
         if c >= 0.5:
@@ -55,8 +59,12 @@ class NaiveBayesOperator(BaseOperator):
 
     name = "naive_bayes"
 
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._reliability = self.config.baselines.naive_bayes.reliability
+
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
-        r = self.config.baselines.naive_bayes.reliability
+        r = self._reliability
         p = r * c + (1.0 - r) * (1.0 - c)
         return mass * p, mass * (1.0 - p)
 
@@ -75,17 +83,18 @@ class RefinedOperator(BaseOperator):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._windows: dict[tuple[Any, str], deque[int]] = {}
+        cfg = self.config.baselines.refined
+        self._window, self._min_support = cfg.window, cfg.min_support
 
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
-        cfg = self.config.baselines.refined
         key = (node, predicate)
         win = self._windows.get(key)
         if win is None:
-            win = self._windows[key] = deque(maxlen=cfg.window)
+            win = self._windows[key] = deque(maxlen=self._window)
         win.append(1 if c >= 0.5 else 0)
         prov = graph.provenance
         a, b = prov.alpha_beta(node, predicate)
-        if len(win) < cfg.min_support:
+        if len(win) < self._min_support:
             ta, tb = prov.prior_alpha, prov.prior_beta
         else:
             pos = sum(win)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any
 
 from scipy import special as _sp
@@ -28,6 +29,28 @@ _REFUSED = EntryStatus.REFUSED
 _NO_CLAIM = Verdict.NO_CLAIM
 _CORR = Verdict.CORROBORATES
 _CONTRA = Verdict.CONTRADICTS
+_BELOW = Action.BELOW_THRESHOLD
+_A_COMMITTED = Action.COMMITTED
+_A_QUARANTINED = Action.QUARANTINED
+_A_REFUSED = Action.REFUSED
+_lgamma = math.lgamma
+
+
+def revision_kl_exceeds(a: float, b: float, da: float, db: float, tau_rev: float) -> bool:
+    """True when KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev (the revision test of §4.3).
+
+    The two log-Beta terms are first evaluated with ``math.lgamma`` (a few times cheaper than
+    ``scipy.special.betaln``); only when that estimate is within a safe margin of ``tau_rev``
+    (far above lgamma's rounding error, which scales with (a + b) log(a + b)) is the KL
+    recomputed with ``betaln``, so the decision is always the one the exact formula gives.
+    """
+    a2, b2 = a + da, b + db
+    dig = (da + db) * _digamma(a + b) - da * _digamma(a) - db * _digamma(b)
+    est = (_lgamma(a2) + _lgamma(b2) - _lgamma(a2 + b2)) - (_lgamma(a) + _lgamma(b) - _lgamma(a + b)) + dig
+    if abs(est - tau_rev) > 1e-8 * (1.0 + a2 + b2):
+        return est > tau_rev
+    exact = _betaln(a2, b2) - _betaln(a, b) - da * _digamma(a) - db * _digamma(b) + (da + db) * _digamma(a + b)
+    return exact > tau_rev
 
 
 class CalibratedOperator(BaseOperator):
@@ -74,8 +97,16 @@ class CalibratedOperator(BaseOperator):
 
     # ----------------------------------------------------------- update
     def update(
-        self, graph: SceneGraph, event: EvidenceEvent, channel: GeometricChannel | None = None
+        self,
+        graph: SceneGraph,
+        event: EvidenceEvent,
+        channel: GeometricChannel | None = None,
+        *,
+        report: bool = True,
     ) -> UpdateReport:
+        """Apply one event (Alg. 1). ``report=False`` skips building the per-target outcomes
+        (the returned report then has ``targets == ()``); the map, queues, provenance, stats and
+        calibration state are the same either way."""
         self._check(graph, event)
         t = event.t
         resolutions = self.tick(graph, t) if t > graph.clock else []
@@ -83,27 +114,31 @@ class CalibratedOperator(BaseOperator):
         tau_t, tau_rev, w0 = cfg.tau_t, cfg.tau_rev, cfg.w0
         pred, c, ctx, eid = event.predicate, event.confidence, event.context, event.id
         prov = graph.provenance
+        record = prov.record
+        gnx = graph.nx
         outcome_of = self.vocabulary.outcome_tables().get(pred) if self.vocabulary is not None else None
+        label_of = channel.label if (channel is not None and outcome_of is not None) else None
         claim_pos = c >= 0.5
         comod = self.check_compatibility
         stats = self.stats
-        stats["events"] += 1
+        n_targets = n_below = n_committed = n_quarantined = n_refused = 0
         lam = kappa = -1.0
         new_outcomes: list[int] = []
         outcomes: list[TargetOutcome] = []
         for node, mass in event.targets.items():
-            stats["targets"] += 1
-            label = channel.label(node, t) if (channel is not None and outcome_of is not None) else None
-            y = outcome_of.get(label) if (label is not None and outcome_of is not None) else None
+            n_targets += 1
+            label = label_of(node, t) if label_of is not None else None
+            y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
             if y is None:
                 verdict = _NO_CLAIM
             else:
                 verdict = _CORR if (y == 1) == claim_pos else _CONTRA
             if mass <= tau_t:
-                stats["below_tau_t"] += 1
-                outcomes.append(TargetOutcome(node, mass, verdict, Action.BELOW_THRESHOLD))
+                n_below += 1
+                if report:
+                    outcomes.append(TargetOutcome(node, mass, verdict, _BELOW))
                 continue
-            if node not in graph.nx:
+            if node not in gnx:
                 graph.ensure_node(node)
             a, b = prov.alpha_beta(node, pred)
             if y is not None:
@@ -117,10 +152,11 @@ class CalibratedOperator(BaseOperator):
             if comod and verdict is _CONTRA:
                 # Property 2: refused and logged, never committed; geometry's stance opposes the claim
                 stance = -1 if claim_pos else 1
-                prov.record(node, pred, eid, t, da, db, _REFUSED, stance=stance)
+                record(node, pred, eid, t, da, db, _REFUSED, stance=stance)
                 resolutions += queues.quarantine_feedback(prov, node, pred, stance, eid, t)
-                stats["refused"] += 1
-                outcomes.append(TargetOutcome(node, mass, verdict, Action.REFUSED, 0.0, 0.0))
+                n_refused += 1
+                if report:
+                    outcomes.append(TargetOutcome(node, mass, verdict, _A_REFUSED, 0.0, 0.0))
                 continue
             stance = 1 if lam > 1.0 else -1 if lam < 1.0 else 0
             if prov._pending_by_pair:
@@ -128,22 +164,29 @@ class CalibratedOperator(BaseOperator):
                 if fb:
                     resolutions += fb
                     a, b = prov.alpha_beta(node, pred)
-            # revision test: KL(Beta(a, b) || Beta(a + da, b + db)) (§4.3)
-            a2, b2 = a + da, b + db
-            d_kl = (
-                _betaln(a2, b2) - _betaln(a, b)
-                - da * _digamma(a) - db * _digamma(b) + (da + db) * _digamma(a + b)
-            )
-            if d_kl <= tau_rev:
-                prov.record(node, pred, eid, t, da, db, _COMMITTED, stance=stance)
-                stats["committed"] += 1
-                outcomes.append(TargetOutcome(node, mass, verdict, Action.COMMITTED, da, db))
+            # revision test: KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev (§4.3)
+            if revision_kl_exceeds(a, b, da, db, tau_rev):
+                record(node, pred, eid, t, da, db, _QUARANTINED, stance=stance)
+                n_quarantined += 1
+                if report:
+                    outcomes.append(TargetOutcome(node, mass, verdict, _A_QUARANTINED, 0.0, 0.0))
             else:
-                prov.record(node, pred, eid, t, da, db, _QUARANTINED, stance=stance)
-                stats["quarantined"] += 1
-                outcomes.append(TargetOutcome(node, mass, verdict, Action.QUARANTINED, 0.0, 0.0))
+                record(node, pred, eid, t, da, db, _COMMITTED, stance=stance)
+                n_committed += 1
+                if report:
+                    outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))
             if comod and verdict is _CORR and prov._pending_by_pair:
                 resolutions += queues.resolve_disagreements(prov, node, pred, t)
+        stats["events"] += 1
+        stats["targets"] += n_targets
+        if n_below:
+            stats["below_tau_t"] += n_below
+        if n_committed:
+            stats["committed"] += n_committed
+        if n_quarantined:
+            stats["quarantined"] += n_quarantined
+        if n_refused:
+            stats["refused"] += n_refused
         if new_outcomes:
             add = self.calibrator_.add
             for y in new_outcomes:
