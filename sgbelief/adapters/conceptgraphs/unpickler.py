@@ -30,7 +30,7 @@ _OTHER = {
     ("pathlib", "PosixPath"), ("pathlib", "WindowsPath"), ("pathlib", "PurePosixPath"),
     ("pathlib", "PureWindowsPath"), ("pathlib", "Path"), ("pathlib._local", "PosixPath"),
     ("pathlib._local", "WindowsPath"), ("uuid", "UUID"), ("uuid", "SafeUUID"),
-    ("collections", "OrderedDict"), ("typing", "Any"),
+    ("collections", "OrderedDict"), ("collections", "defaultdict"), ("typing", "Any"),
 }
 _OMEGACONF_PREFIXES = ("omegaconf.dictconfig", "omegaconf.listconfig", "omegaconf.base", "omegaconf.nodes")
 
