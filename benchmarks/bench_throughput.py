@@ -1,0 +1,82 @@
+"""Streaming throughput per operator on the simulated outdoor stream, vs a minimal reference loop.
+
+Each operator first replays the stream once (warm: calibration buffer filled), then the same
+stream again shifted in time with new event ids, timed (process CPU time). The reference loop is a
+plain Python loop doing one dict increment per event over the same event objects, in the same run.
+
+Usage: .venv/bin/python benchmarks/bench_throughput.py [--seed 0] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import _common  # noqa: F401  (sys.path)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    from sgbelief.eval.replay import make_runs, to_event
+    from sgbelief.eval.simulate import simulate
+    from sgbelief.fusion.compatibility import SubsumptionTable
+    from sgbelief.fusion.registry import OPERATOR_NAMES
+
+    suite = simulate("outdoor", args.seed)
+    recs = suite.events_for("vlm_a", "oracle")
+    vocab = SubsumptionTable.shipped("kitti360")
+    shift = recs[-1].t + 1
+    warm = [to_event(r, f"a{i}") for i, r in enumerate(recs)]
+    timed = [to_event(r._replace(t=r.t + shift), f"b{i}") for i, r in enumerate(recs)]
+    n = len(timed)
+    clock = time.process_time
+
+    def ref_loop() -> float:
+        best = 0.0
+        for _ in range(args.repeat):
+            d: dict[str, int] = {}
+            t0 = clock()
+            for ev, _lab in timed:
+                k = ev.predicate
+                d[k] = d.get(k, 0) + 1
+            best = max(best, n / max(clock() - t0, 1e-9))
+        return best
+
+    ref_before = ref_loop()
+    out = {}
+    for name in OPERATOR_NAMES:
+        row = {}
+        for report in (True, False):
+            best = 0.0
+            for _ in range(args.repeat):
+                run = make_runs([name], vocab)[0]
+                op, g = run.operator, run.graph
+                for ev, lab in warm:
+                    op.update(g, ev, lab)
+                upd = op.update
+                t0 = clock()
+                if report:
+                    for ev, lab in timed:
+                        upd(g, ev, lab)
+                else:
+                    for ev, lab in timed:
+                        upd(g, ev, lab, report=False)
+                best = max(best, n / (clock() - t0))
+            row["events_per_s" if report else "events_per_s_no_report"] = round(best)
+        out[name] = row
+    ref = max(ref_before, ref_loop())
+    for row in out.values():
+        row["ratio_to_ref"] = round(row["events_per_s"] / ref, 5)
+    res = {"bench": "throughput", "events": n, "targets_per_event": round(sum(len(e.targets) for e, _ in timed) / n, 2),
+           "reference_loop_events_per_s": round(ref), "operators": out}
+    print(json.dumps(res) if args.json else json.dumps(res, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

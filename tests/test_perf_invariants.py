@@ -1,0 +1,51 @@
+"""Structural performance invariants (no wall-clock assertions): bounded provenance, amortised refits,
+report=False changes nothing but the report."""
+
+from __future__ import annotations
+
+from sgbelief.eval.batched import random_records
+from sgbelief.eval.replay import make_runs, to_event
+from sgbelief.fusion.calibration import MondrianCalibrator
+
+
+def test_provenance_live_entries_bounded_by_compaction_horizon() -> None:
+    run = make_runs(["comod"], None, {"t_prov": 20})[0]
+    recs = random_records(0, 3000, n_nodes=15)
+    for i, r in enumerate(recs):
+        ev, lab = to_event(r, f"x{i}")
+        run.operator.update(run.graph, ev, lab)
+    prov = run.graph.provenance
+    last_t = recs[-1].t
+    # every live un-compacted entry is younger than two horizons; logs hold <= 1 bucket each
+    assert all(e.t >= last_t - 2 * 20 for e in prov._timeline)
+    assert prov.n_compacted > 2000
+    for key in prov.pairs():
+        assert sum(e.status.value == "compacted" for e in prov.entries(*key)) <= 1
+
+
+def test_report_false_gives_the_same_state() -> None:
+    recs = random_records(3, 800, n_nodes=10)
+    states = []
+    for report in (True, False):
+        run = make_runs(["comod"], None)[0]
+        for i, r in enumerate(recs):
+            ev, lab = to_event(r, f"x{i}")
+            rep = run.operator.update(run.graph, ev, lab, report=report)
+            assert report or rep.targets == ()
+        prov = run.graph.provenance
+        states.append(({k: prov.alpha_beta(*k) for k in prov.pairs()}, dict(run.operator.stats)))
+    assert states[0] == states[1]
+
+
+def test_calibration_refits_logarithmic_and_buffer_sorted() -> None:
+    cal = MondrianCalibrator()
+    fits = 0
+    last = 0
+    for i in range(20000):
+        cal.add("k", "p", (i * 7919 % 1000) / 1000, i % 3 == 0)
+        s = cal.slices[("k", "p")]
+        if s.n_fit != last:
+            fits, last = fits + 1, s.n_fit
+    assert fits < 120
+    s = cal.slices[("k", "p")]
+    assert (s.sx[1:] >= s.sx[:-1]).all() and len(s.sx) + len(s.c) == s.n
