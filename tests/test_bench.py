@@ -28,3 +28,20 @@ def test_bench_tiny_indoor(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     for r in doc["real_calibration"].values():
         assert r["calibrated_ece"] < r["raw_ece"]
+
+
+@pytest.mark.slow
+def test_bench_workers_identical_to_serial(tmp_path: Path) -> None:
+    from sgbelief.eval.benchmark import run_bench
+
+    def strip(x):
+        if isinstance(x, dict):
+            return {k: strip(v) for k, v in x.items() if k not in ("events_per_s", "seconds", "sim_stats")}
+        if isinstance(x, list):
+            return [strip(v) for v in x]
+        return x
+
+    kw = dict(seed=3, scale=0.1, retrieval=False, real_data=False, operators=("majority", "comod"))
+    serial = run_bench(["indoor", "outdoor"], out=tmp_path / "a", **kw)
+    parallel = run_bench(["indoor", "outdoor"], out=tmp_path / "b", workers=2, **kw)
+    assert strip(serial["suites"]) == strip(parallel["suites"])

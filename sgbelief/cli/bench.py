@@ -21,6 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-retrieval", action="store_true", help="skip the compound-query retrieval table")
     p.add_argument("--no-real", action="store_true", help="skip the real detector-confidence calibration report")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--workers", type=int, default=1, help="run the suites in parallel processes")
+    p.add_argument("--executor", choices=["local", "ray"], default="local", help="local process pool or a Ray cluster")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -41,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         results = run_bench(suites, seed=args.seed, out=args.out, operators=ops, config=config, fm_source=args.fm_source,
-                            scale=args.scale, retrieval=not args.no_retrieval, real_data=not args.no_real, progress=progress)
+                            scale=args.scale, retrieval=not args.no_retrieval, real_data=not args.no_real, progress=progress,
+                            workers=args.workers, executor=args.executor)
     finally:
         bar.close()
     print((args.out / "results.md").read_text())

@@ -11,7 +11,8 @@ from sgbelief.fusion.registry import OPERATOR_NAMES
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("events", type=Path, help="events.jsonl evidence log")
+    p.add_argument("events", type=Path, nargs="+",
+                   help="events.jsonl evidence log; several logs = several scenes (unique node ids), pooled")
     p.add_argument("--truth", type=Path, required=True, help="truth.json {node: {predicate: 0|1}}")
     p.add_argument("--vocab", required=True, help="vocabulary YAML (subsumption table) or a shipped name: scannet, kitti360")
     p.add_argument("--operators", default=",".join(OPERATOR_NAMES), help="comma-separated operator names")
@@ -22,6 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tau", type=float, default=0.5, help="commit threshold for the metrics")
     p.add_argument("--allow-unknown-predicates", action="store_true", help="accept predicates the vocabulary does not define")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--workers", type=int, default=1, help="replay several scenes in parallel processes")
+    p.add_argument("--executor", choices=["local", "ray"], default="local",
+                   help="local process pool, or a Ray cluster (pip install 'sgbelief[ray]'; RAY_ADDRESS)")
 
 
 def load_vocab(spec: str):
@@ -46,7 +50,10 @@ def run(args: argparse.Namespace) -> int:
     if not names:
         raise ConfigError("--operators: give at least one operator name")
     truth = read_truth(args.truth)
+    if len(args.events) > 1 or args.workers > 1 or args.executor != "local":
+        return _run_scenes(args, names, truth, vocab, config)
     runs = make_runs(names, vocab, config, strict=not args.allow_unknown_predicates)
+    args.events = args.events[0]
     stats = ReadStats()
     progress = None
     if not args.no_progress and sys.stderr.isatty():
@@ -72,4 +79,33 @@ def run(args: argparse.Namespace) -> int:
     if args.save_graph:
         for r in runs:
             r.graph.save(args.save_graph / r.name)
+    return 0
+
+
+def _predicates(vocab, truth) -> list[str]:
+    preds = [p for p in vocab.predicates if any(p in row for row in truth.values())]
+    return preds + sorted({p for row in truth.values() for p in row} - set(preds))
+
+
+def _run_scenes(args: argparse.Namespace, names: list[str], truth, vocab, config) -> int:
+    """Several scenes: each replayed independently (serial, process pool or Ray), metrics pooled."""
+    from sgbelief.eval.parallel import run_scenes
+    from sgbelief.eval.replay import SceneJob, format_table, pool_scene_scores, replay_scene
+    from sgbelief.graph.persistence import atomic_write_text
+
+    jobs = [SceneJob(str(e), tuple(names), str(args.vocab), config.model_dump(), not args.allow_unknown_predicates,
+                     args.skip_bad_lines, str(args.save_graph) if args.save_graph else None) for e in args.events]
+    results = run_scenes(replay_scene, jobs, workers=args.workers, executor=args.executor)
+    preds = _predicates(vocab, truth)
+    scores = pool_scene_scores(results, truth, preds, tau=args.tau)
+    n = sum(r.n_events for r in results)
+    skipped = sum(r.skipped for r in results)
+    print(f"{n} events replayed from {len(results)} scenes" + (f" ({skipped} bad lines skipped)" if skipped else ""))
+    print(format_table(scores, preds))
+    if args.json_out:
+        doc = {name: sc.as_dict() for name, sc in scores.items()}
+        for d in doc.values():
+            d["skipped_lines"] = skipped
+            d["scenes"] = len(results)
+        atomic_write_text(args.json_out, json.dumps(doc, indent=2, allow_nan=True))
     return 0

@@ -271,67 +271,37 @@ def run_bench(
     retrieval: bool = True,
     real_data: bool = True,
     progress: Progress = _noop,
+    workers: int = 1,
+    executor: str = "local",
 ) -> dict[str, Any]:
-    """Run the whole benchmark; writes results.json, results.md and figures into ``out``."""
-    from sgbelief.eval.simulate import simulate
+    """Run the whole benchmark; writes results.json, results.md and figures into ``out``.
 
+    ``workers`` > 1 (or ``executor="ray"``) runs the suites in parallel; results are identical.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     config = config or OperatorConfig.default()
-    uniform = config.model_copy(update={"calibration": config.calibration.model_copy(update={"lr_reference": "uniform"})})
     started = time.perf_counter()
     results: dict[str, Any] = {"meta": {"seed": seed, "suites": list(suites), "operators": list(operators),
                                         "python": platform.python_version(), "machine": platform.machine()},
                                "suites": {}}
+    jobs = [_SuiteJob(name, seed, str(out), tuple(operators), config.model_dump(), fm_source, scale, retrieval)
+            for name in suites]
     sim_cal: dict[str, Any] = {}
     traces: dict[str, Any] = {}
-    for name in suites:
-        spec = SUITES[name]
-        progress(f"{name}: simulating")
-        suite = simulate(name, seed, fm_source=fm_source, scale=scale)
-        table = SubsumptionTable.shipped(spec.vocab)
-        preds = list(spec.predicates)
-        data_dir = out / "data" / name
-        suite.write(data_dir, profile="vlm_a", channel="oracle")
-        ev_a = suite.events_for("vlm_a", "oracle")
-        res: dict[str, Any] = {"title": spec.title, "events": len(ev_a), "sim_stats": _jsonable(suite.stats)}
-        progress(f"{name}: six operators, vlm_a + oracle channel ({len(ev_a)} events)")
-        main = _run(ev_a, operators, table, suite.truth, preds, config)
-        res["table2"] = _scores_dict(main)
-        progress(f"{name}: six operators, vlm_b (confidence swap)")
-        swap = _run(suite.events_for("vlm_b", "oracle"), operators, table, suite.truth, preds, config)
-        res["vlm_swap"] = {op: {"brier_vlm_a": main[op].brier, "brier_vlm_b": swap[op].brier,
-                                "delta": swap[op].brier - main[op].brier,
-                                "mean_iou_vlm_a": main[op].mean_iou, "mean_iou_vlm_b": swap[op].mean_iou}
-                           for op in operators}
-        progress(f"{name}: comod with the segmenter channel")
-        seg = _run(suite.events_for("vlm_a", "segmenter"), ["comod"], table, suite.truth, preds, config)
-        res["table5"] = {"oracle": main["comod"].as_dict(), "segmenter": seg["comod"].as_dict(),
-                         "bot_rate_oracle": _bot_rate(main["comod"]), "bot_rate_segmenter": _bot_rate(seg["comod"]),
-                         "segmenter_miou": suite.stats.get("segmenter_miou")}
-        progress(f"{name}: ablation lr_reference=uniform")
-        abl = _run(ev_a, [o for o in ("cal", "comod") if o in operators], table, suite.truth, preds, uniform)
-        res["ablation_uniform"] = _scores_dict(abl)
-        c, y, k, p = _verified_claims(ev_a, table, preds)
-        if len(c) > 20:
-            sim_cal[name] = calibration_split(c, y, list(zip(k, p)), seed=seed, alpha=config.alpha)
-            res["calibration"] = {kk: v for kk, v in sim_cal[name].items() if not kk.startswith("_")}
-        pair = _contradicted_pair(ev_a, table, suite.truth, preds)
-        if pair is not None:
-            progress(f"{name}: trace of contradicted element {pair}")
-            traces[name] = element_trace(ev_a, table, pair, config)
-            res["trace"] = {k2: v for k2, v in traces[name].items() if k2 != "trace"}
-        if retrieval:
-            progress(f"{name}: compound-query retrieval")
-            try:
-                from sgbelief.query.retrieval import evaluate_retrieval, suite_retrieval_data
+    if workers > 1 or executor != "local":
+        from sgbelief.eval.parallel import run_scenes
 
-                rdata = suite_retrieval_data(data_dir, spec.vocab)
-                scores = evaluate_retrieval(rdata, operators, operator_config=config)
-                res["retrieval"] = [s.to_dict() for s in scores]
-            except Exception as exc:  # reported, never silently dropped
-                res["retrieval_error"] = f"{type(exc).__name__}: {exc}"
+        progress(f"{len(jobs)} suites on {workers} workers ({executor})")
+        outcomes = run_scenes(_bench_suite, jobs, workers=workers, executor=executor)
+    else:
+        outcomes = [_bench_suite(job, progress) for job in jobs]
+    for name, (res, cal_report, trace) in zip(suites, outcomes):
         results["suites"][name] = res
+        if cal_report is not None:
+            sim_cal[name] = cal_report
+        if trace is not None:
+            traces[name] = trace
     real: dict[str, Any] = {}
     if real_data:
         progress("real detector confidences: per-class calibration")
@@ -344,6 +314,75 @@ def run_bench(
     atomic_write_text(out / "results.json", json.dumps(_jsonable(results), indent=2))
     atomic_write_text(out / "results.md", render_markdown(results))
     return results
+
+
+@dataclass(frozen=True)
+class _SuiteJob:
+    name: str
+    seed: int
+    out: str
+    operators: tuple[str, ...]
+    config: dict[str, Any]
+    fm_source: str | None
+    scale: float | None
+    retrieval: bool
+
+
+def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, Any], dict[str, Any] | None, dict[str, Any] | None]:
+    """Everything bench measures on one simulated suite (module-level so it can run in a worker)."""
+    from sgbelief.eval.simulate import simulate
+
+    name, seed, operators = job.name, job.seed, list(job.operators)
+    config = OperatorConfig.from_mapping(job.config)
+    uniform = config.model_copy(update={"calibration": config.calibration.model_copy(update={"lr_reference": "uniform"})})
+    spec = SUITES[name]
+    progress(f"{name}: simulating")
+    suite = simulate(name, seed, fm_source=job.fm_source, scale=job.scale)
+    table = SubsumptionTable.shipped(spec.vocab)
+    preds = list(spec.predicates)
+    data_dir = Path(job.out) / "data" / name
+    suite.write(data_dir, profile="vlm_a", channel="oracle")
+    ev_a = suite.events_for("vlm_a", "oracle")
+    res: dict[str, Any] = {"title": spec.title, "events": len(ev_a), "sim_stats": _jsonable(suite.stats)}
+    progress(f"{name}: six operators, vlm_a + oracle channel ({len(ev_a)} events)")
+    main = _run(ev_a, operators, table, suite.truth, preds, config)
+    res["table2"] = _scores_dict(main)
+    progress(f"{name}: six operators, vlm_b (confidence swap)")
+    swap = _run(suite.events_for("vlm_b", "oracle"), operators, table, suite.truth, preds, config)
+    res["vlm_swap"] = {op: {"brier_vlm_a": main[op].brier, "brier_vlm_b": swap[op].brier,
+                            "delta": swap[op].brier - main[op].brier,
+                            "mean_iou_vlm_a": main[op].mean_iou, "mean_iou_vlm_b": swap[op].mean_iou}
+                       for op in operators}
+    cal_report = trace = None
+    if "comod" in operators:
+        progress(f"{name}: comod with the segmenter channel")
+        seg = _run(suite.events_for("vlm_a", "segmenter"), ["comod"], table, suite.truth, preds, config)
+        res["table5"] = {"oracle": main["comod"].as_dict(), "segmenter": seg["comod"].as_dict(),
+                         "bot_rate_oracle": _bot_rate(main["comod"]), "bot_rate_segmenter": _bot_rate(seg["comod"]),
+                         "segmenter_miou": suite.stats.get("segmenter_miou")}
+    progress(f"{name}: ablation lr_reference=uniform")
+    calibrated = [o for o in ("cal", "comod") if o in operators]
+    if calibrated:
+        res["ablation_uniform"] = _scores_dict(_run(ev_a, calibrated, table, suite.truth, preds, uniform))
+    c, y, k, p = _verified_claims(ev_a, table, preds)
+    if len(c) > 20:
+        cal_report = calibration_split(c, y, list(zip(k, p)), seed=seed, alpha=config.alpha)
+        res["calibration"] = {kk: v for kk, v in cal_report.items() if not kk.startswith("_")}
+    pair = _contradicted_pair(ev_a, table, suite.truth, preds)
+    if pair is not None:
+        progress(f"{name}: trace of contradicted element {pair}")
+        trace = element_trace(ev_a, table, pair, config)
+        res["trace"] = {k2: v for k2, v in trace.items() if k2 != "trace"}
+    if job.retrieval:
+        progress(f"{name}: compound-query retrieval")
+        try:
+            from sgbelief.query.retrieval import evaluate_retrieval, suite_retrieval_data
+
+            rdata = suite_retrieval_data(data_dir, spec.vocab)
+            res["retrieval"] = [sc.to_dict() for sc in evaluate_retrieval(rdata, operators, operator_config=config)]
+        except Exception as exc:  # reported in the results, never silently dropped
+            res["retrieval_error"] = f"{type(exc).__name__}: {exc}"
+    return res, cal_report, trace
 
 
 def _jsonable(x: Any) -> Any:
@@ -378,16 +417,17 @@ def render_markdown(results: dict[str, Any]) -> str:
         for op, sc in res["table2"].items():
             lines.append(f"| {op} | " + " | ".join(_f(sc["per_predicate"][p]["iou"]) for p in preds)
                          + f" | {_f(sc['mean_iou'])} | {_f(sc['brier'], 4)} | {sc['refusals']} |")
-        t5 = res["table5"]
-        lines += ["", f"### comod: oracle vs segmenter channel (Table 5 layout; segmenter mIoU {_f(t5.get('segmenter_miou'))})", "",
-                  "| predicate | IoU oracle | P | R | IoU segmenter | P | R | ΔIoU |", "|---|---|---|---|---|---|---|---|"]
-        for p in preds:
-            o, s = t5["oracle"]["per_predicate"][p], t5["segmenter"]["per_predicate"][p]
-            lines.append(f"| {p} | {_f(o['iou'])} | {_f(o['precision'])} | {_f(o['recall'])} | {_f(s['iou'])} | "
-                         f"{_f(s['precision'])} | {_f(s['recall'])} | {_f(s['iou'] - o['iou'])} |")
-        lines.append(f"| mean | {_f(t5['oracle']['mean_iou'])} | | | {_f(t5['segmenter']['mean_iou'])} | | | "
-                     f"{_f(t5['segmenter']['mean_iou'] - t5['oracle']['mean_iou'])} |")
-        lines.append(f"\n⊥-emission rate: oracle {_f(t5['bot_rate_oracle'])}, segmenter {_f(t5['bot_rate_segmenter'])}")
+        if "table5" in res:
+            t5 = res["table5"]
+            lines += ["", f"### comod: oracle vs segmenter channel (Table 5 layout; segmenter mIoU {_f(t5.get('segmenter_miou'))})", "",
+                      "| predicate | IoU oracle | P | R | IoU segmenter | P | R | ΔIoU |", "|---|---|---|---|---|---|---|---|"]
+            for p in preds:
+                o, s = t5["oracle"]["per_predicate"][p], t5["segmenter"]["per_predicate"][p]
+                lines.append(f"| {p} | {_f(o['iou'])} | {_f(o['precision'])} | {_f(o['recall'])} | {_f(s['iou'])} | "
+                             f"{_f(s['precision'])} | {_f(s['recall'])} | {_f(s['iou'] - o['iou'])} |")
+            lines.append(f"| mean | {_f(t5['oracle']['mean_iou'])} | | | {_f(t5['segmenter']['mean_iou'])} | | | "
+                         f"{_f(t5['segmenter']['mean_iou'] - t5['oracle']['mean_iou'])} |")
+            lines.append(f"\n⊥-emission rate: oracle {_f(t5['bot_rate_oracle'])}, segmenter {_f(t5['bot_rate_segmenter'])}")
         lines += ["", "### Cross-VLM invariance: Brier under vlm_a → vlm_b (pairs with evidence)", "",
                   "| operator | Brier vlm_a | Brier vlm_b | Δ | mean IoU vlm_a | mean IoU vlm_b |", "|---|---|---|---|---|---|"]
         for op, v in res["vlm_swap"].items():

@@ -187,3 +187,90 @@ def format_table(scores: Mapping[str, OperatorScores], predicates: Sequence[str]
         row += f"{sc.mean_iou:>7.3f}{sc.brier:>8.4f}{sc.refusals:>9d}{sc.quarantined:>7d}{sc.released:>6d}{sc.events_per_s:>11.0f}"
         lines.append(row)
     return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ many scenes
+@dataclass
+class SceneJob:
+    """One scene's replay, picklable so it can run in a worker process or a Ray task."""
+
+    events: str
+    operators: tuple[str, ...]
+    vocab: str
+    config: dict[str, Any] | None = None
+    strict: bool = True
+    skip_bad_lines: bool = False
+    save_graph: str | None = None
+
+
+@dataclass
+class SceneResult:
+    """Per-operator end-of-stream probabilities of the pairs a scene's graph holds, and counters."""
+
+    events: str
+    n_events: int
+    skipped: int
+    probabilities: dict[str, dict[str, dict[str, float]]]  # operator -> node -> predicate -> p
+    evidence_pairs: dict[str, list[tuple[str, str]]]
+    stats: dict[str, dict[str, int]]
+    seconds: dict[str, float]
+
+
+def _vocab_from_spec(spec: str) -> SubsumptionTable:
+    path = Path(spec)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        return SubsumptionTable.from_yaml(path)
+    return SubsumptionTable.shipped(spec)
+
+
+def replay_scene(job: SceneJob) -> SceneResult:
+    """Replay one scene's ``events.jsonl`` through the job's operators (module-level: picklable)."""
+    vocab = _vocab_from_spec(job.vocab)
+    config = OperatorConfig.from_mapping(job.config) if job.config is not None else OperatorConfig.default()
+    stats = ReadStats()
+    runs = make_runs(list(job.operators), vocab, config, strict=job.strict)
+    replay(iter_events(job.events, skip_bad_lines=job.skip_bad_lines, stats=stats), runs, line_of=stats, source=job.events)
+    probs: dict[str, dict[str, dict[str, float]]] = {}
+    pairs: dict[str, list[tuple[str, str]]] = {}
+    for r in runs:
+        prov = r.graph.provenance
+        d: dict[str, dict[str, float]] = {}
+        for node, pred in prov.pairs():
+            d.setdefault(node, {})[pred] = prov.mean(node, pred)
+        probs[r.name] = d
+        pairs[r.name] = list(prov.pairs())
+        if job.save_graph:
+            r.graph.save(Path(job.save_graph) / r.name / Path(job.events).parent.name)
+    return SceneResult(
+        job.events, stats.events, stats.skipped, probs, pairs,
+        {r.name: dict(getattr(r.operator, "stats", {})) for r in runs}, {r.name: r.seconds for r in runs},
+    )
+
+
+def pool_scene_scores(
+    results: Sequence[SceneResult], truth: Mapping[str, Mapping[str, int]], predicates: Sequence[str], *, tau: float = 0.5,
+) -> dict[str, OperatorScores]:
+    """Metrics over the union of several scenes (node ids are unique across scenes)."""
+    if not results:
+        return {}
+    out: dict[str, OperatorScores] = {}
+    for name in results[0].probabilities:
+        probs: dict[str, dict[str, float]] = {}
+        pairs: list[tuple[str, str]] = []
+        stats: dict[str, int] = {}
+        seconds = 0.0
+        for res in results:
+            for node, row in res.probabilities[name].items():
+                probs.setdefault(node, {}).update(row)
+            pairs += [p for p in res.evidence_pairs[name] if p[1] in predicates]
+            for k, v in res.stats[name].items():
+                stats[k] = stats.get(k, 0) + v
+            seconds += res.seconds[name]
+        n = sum(r.n_events for r in results)
+        per = per_predicate_scores(probs, truth, predicates, tau=tau)
+        out[name] = OperatorScores(
+            per_predicate=per, mean_iou=mean_iou(per), brier=brier_over_pairs(probs, truth, pairs),
+            refusals=stats.get("refused", 0), quarantined=stats.get("quarantined", 0), released=stats.get("released", 0),
+            events=n, events_per_s=n / seconds if seconds > 0 else float("nan"), stats=stats,
+        )
+    return out
