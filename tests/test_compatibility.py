@@ -80,3 +80,11 @@ def test_invalid_vocabulary_names_the_key(tmp_path: Path) -> None:
     p.write_text("predicates:\n  is_chair:\n    positiv: [chair]\n")
     with pytest.raises(ConfigError, match="positiv"):
         SubsumptionTable.from_yaml(p)
+
+
+def test_resolve_accepts_instance_path_or_shipped_name(table: SubsumptionTable) -> None:
+    assert SubsumptionTable.resolve(table) is table
+    assert SubsumptionTable.resolve("kitti360").predicates == table.predicates
+    assert SubsumptionTable.resolve(config_path("vocab", "scannet.yaml")).name == "scannet"
+    with pytest.raises(FileNotFoundError):
+        SubsumptionTable.resolve("no_such_vocabulary")

@@ -28,15 +28,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="local process pool, or a Ray cluster (pip install 'sgbelief[ray]'; RAY_ADDRESS)")
 
 
-def load_vocab(spec: str):
-    from sgbelief.fusion.compatibility import SubsumptionTable
-
-    path = Path(spec)
-    if path.suffix in (".yaml", ".yml") or path.exists():
-        return SubsumptionTable.from_yaml(path)
-    return SubsumptionTable.shipped(spec)
-
-
 def run(args: argparse.Namespace) -> int:
     from sgbelief.errors import ConfigError
     from sgbelief.eval.formats import ReadStats, iter_events, read_truth
@@ -44,7 +35,9 @@ def run(args: argparse.Namespace) -> int:
     from sgbelief.fusion.config import OperatorConfig
     from sgbelief.graph.persistence import atomic_write_text
 
-    vocab = load_vocab(args.vocab)
+    from sgbelief.fusion.compatibility import SubsumptionTable
+
+    vocab = SubsumptionTable.resolve(args.vocab)
     config = OperatorConfig.from_yaml(args.config) if args.config else OperatorConfig.default()
     names = [n.strip() for n in args.operators.split(",") if n.strip()]
     if not names:

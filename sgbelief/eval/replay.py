@@ -8,7 +8,7 @@ Metrics compare the end-of-stream maps with ground truth (truth is never shown t
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -168,11 +168,6 @@ def score_run(
     )
 
 
-def iter_records(records: Iterable[EventRecord]) -> Iterator[EventRecord]:
-    """Identity helper so in-memory lists and file streams share one code path."""
-    yield from records
-
-
 def format_table(scores: Mapping[str, OperatorScores], predicates: Sequence[str]) -> str:
     """A fixed-width text table: one row per operator."""
     short = [p.removeprefix("is_")[:12] for p in predicates]
@@ -216,16 +211,9 @@ class SceneResult:
     seconds: dict[str, float]
 
 
-def _vocab_from_spec(spec: str) -> SubsumptionTable:
-    path = Path(spec)
-    if path.suffix in (".yaml", ".yml") or path.exists():
-        return SubsumptionTable.from_yaml(path)
-    return SubsumptionTable.shipped(spec)
-
-
 def replay_scene(job: SceneJob) -> SceneResult:
     """Replay one scene's ``events.jsonl`` through the job's operators (module-level: picklable)."""
-    vocab = _vocab_from_spec(job.vocab)
+    vocab = SubsumptionTable.resolve(job.vocab)
     config = OperatorConfig.from_mapping(job.config) if job.config is not None else OperatorConfig.default()
     stats = ReadStats()
     runs = make_runs(list(job.operators), vocab, config, strict=job.strict)

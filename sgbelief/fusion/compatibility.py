@@ -139,6 +139,16 @@ class SubsumptionTable:
 
         return cls.from_yaml(config_path("vocab", f"{name}.yaml"))
 
+    @classmethod
+    def resolve(cls, spec: SubsumptionTable | str | Path) -> SubsumptionTable:
+        """A table instance as is, a YAML path, or a shipped name (``scannet``, ``kitti360``)."""
+        if isinstance(spec, SubsumptionTable):
+            return spec
+        path = Path(spec)
+        if path.suffix in (".yaml", ".yml") or path.exists():
+            return cls.from_yaml(path)
+        return cls.shipped(str(spec))
+
     # ------------------------------------------------------------------ queries
     @property
     def predicates(self) -> list[str]:

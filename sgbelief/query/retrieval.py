@@ -207,14 +207,7 @@ def _queries_for(spec: str | Path | Mapping[str, NamedQuery]) -> tuple[dict[str,
 def _load_vocab(vocab: Any) -> Any:
     from sgbelief.fusion.compatibility import SubsumptionTable
 
-    if isinstance(vocab, SubsumptionTable):
-        return vocab
-    p = Path(vocab)
-    if not p.exists():
-        from sgbelief.resources import config_path
-
-        p = config_path("vocab", f"{vocab}.yaml") if not str(vocab).endswith(".yaml") else config_path(str(vocab))
-    return SubsumptionTable.from_yaml(p)
+    return SubsumptionTable.resolve(vocab)
 
 
 def scannet_retrieval_data(scenes: str | Path, events: str | Path, vocab: Any = "scannet", *,
