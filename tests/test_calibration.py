@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from sklearn.isotonic import IsotonicRegression
 
 from sgbelief.fusion.calibration import CalibrationSlice, MondrianCalibrator
@@ -123,3 +125,59 @@ def test_lr_reference_uniform_keeps_the_calibrated_posterior_odds() -> None:
     eps = 0.5 / (s.n_fit + 1)
     p = min(max(s.p_hat(0.8), eps), 1 - eps)
     assert uniform.likelihood_ratio(0.8, "k", "p")[0] == pytest.approx(p / (1 - p))
+
+
+def test_sliding_window_equals_a_fresh_fit_on_the_last_outcomes() -> None:
+    """With buffer_size = W, after every refit the slice holds exactly the last W outcomes:
+    same knots, base rate and conformal scores as an unbounded slice fitted on that tail."""
+    c, y = _data(3000, seed=4)
+    w = 500
+    s = CalibrationSlice(alpha=0.1, capacity=w)
+    cfg = CalibrationConfig()
+    checked = 0
+    for i, (ci, yi) in enumerate(zip(c, y)):
+        s.add(float(ci), int(yi))
+        if s.n - s.n_fit >= max(cfg.min_refit, cfg.refit_growth * s.n_fit) or s.n_fit == 0:
+            s.refit()
+            tail_c, tail_y = c[max(0, i + 1 - w) : i + 1], y[max(0, i + 1 - w) : i + 1]
+            ref = CalibrationSlice(alpha=0.1)
+            for cj, yj in zip(tail_c, tail_y):
+                ref.add(float(cj), int(yj))
+            ref.refit()
+            assert s.n == ref.n == len(tail_c) and s.n_pos == ref.n_pos
+            assert s.kx == ref.kx and s.ky == ref.ky
+            np.testing.assert_array_equal(s.conformal.sorted, ref.conformal.sorted)
+            checked += 1
+    assert s.n_seen == 3000 and s.n <= w + max(cfg.min_refit, cfg.refit_growth * w)
+    assert checked > 20
+
+
+def test_calibrator_buffer_is_bounded_by_buffer_size() -> None:
+    cal = MondrianCalibrator(CalibrationConfig(buffer_size=256))
+    c, y = _data(5000, seed=5)
+    for ci, yi in zip(c, y):
+        cal.add("k", "p", float(ci), int(yi))
+    cal.refit_all()
+    for key in (("k", "p"), ("*", "p"), ("*", "*")):
+        s = cal.slices[key]
+        assert s.n == 256 and s.n_seen == 5000
+        assert len(s.fc) == len(s.sx0) + len(s.sx1) == s.conformal.n_sorted == 256
+    assert cal.n_outcomes() == 256 and cal.n_outcomes(seen=True) == 5000
+    lam, kappa = cal.likelihood_ratio(0.7, "k", "p")
+    assert math.isfinite(lam) and lam > 0 and kappa == 1.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(0, 20), min_size=1, max_size=60), st.data())
+def test_remove_sorted_removes_one_occurrence_each(values: list[int], data: st.DataObject) -> None:
+    from sgbelief.fusion.conformal import remove_sorted
+
+    base = np.sort(np.array(values, dtype=np.float64) / 4)
+    k = data.draw(st.integers(0, len(values)))
+    idx = data.draw(st.permutations(range(len(values))))[:k]
+    removed = base[list(idx)] if k else np.empty(0)
+    out = remove_sorted(base, removed)
+    expected = np.delete(base, list(idx)) if k else base
+    np.testing.assert_array_equal(out, np.sort(expected))
+    with pytest.raises(ValueError):
+        remove_sorted(base, np.array([99.0]))

@@ -48,4 +48,5 @@ def test_calibration_refits_logarithmic_and_buffer_sorted() -> None:
             fits, last = fits + 1, s.n_fit
     assert fits < 120
     s = cal.slices[("k", "p")]
-    assert (s.sx[1:] >= s.sx[:-1]).all() and len(s.sx) + len(s.c) == s.n
+    assert (s.sx0[1:] >= s.sx0[:-1]).all() and (s.sx1[1:] >= s.sx1[:-1]).all()
+    assert len(s.sx0) + len(s.sx1) + len(s.c) == s.n

@@ -34,11 +34,13 @@ import numpy as np
 from sgbelief.fusion.config import CalibrationConfig
 from sgbelief.fusion.conformal import (
     ConformalSlice,
-    merge_sorted,
     PredictionSet,
+    merge_sorted,
     no_coverage,
     nonconformity,
     prediction_set,
+    remove_sorted,
+    slide_window,
 )
 
 _GLOBAL = ("*", "*")
@@ -73,30 +75,43 @@ class CalibrationSlice:
     """The outcomes of one Mondrian slice and its current isotonic fit.
 
     Outcomes added since the last fit wait in ``c`` / ``y`` (arrival order); a refit merges them
-    into the x-sorted arrays ``sx`` / ``sy`` (one sort of the new outcomes plus a linear merge,
-    so a refit costs O(n + k log k) instead of re-sorting the whole buffer).
+    into the sorted confidence arrays ``sx0`` (outcomes y = 0) and ``sx1`` (y = 1): one sort of
+    the new outcomes plus a linear merge, so a refit costs O(n + k log k) instead of re-sorting
+    the whole buffer. With a ``capacity`` the slice is a sliding window over its most recent
+    ``capacity`` outcomes (``fc`` / ``fy`` keep them in arrival order; the oldest are removed
+    from the sorted arrays at the refit that pushes them out), so memory stays bounded.
     """
 
-    __slots__ = ("c", "y", "sx", "sy", "n", "n_pos", "n_fit", "kx", "ky", "base_rate", "log_prior_odds", "conformal")
+    __slots__ = (
+        "c", "y", "sx0", "sx1", "fc", "fy", "capacity", "n", "n_pos", "n_fit", "n_seen",
+        "kx", "ky", "base_rate", "log_prior_odds", "conformal",
+    )
 
-    def __init__(self, alpha: float) -> None:
+    def __init__(self, alpha: float, capacity: int | None = None) -> None:
         self.c = array("d")
         self.y = array("b")
-        self.sx: np.ndarray = np.empty(0, dtype=np.float64)
-        self.sy: np.ndarray = np.empty(0, dtype=np.int8)
+        self.sx0: np.ndarray = np.empty(0, dtype=np.float64)
+        self.sx1: np.ndarray = np.empty(0, dtype=np.float64)
+        self.fc: np.ndarray = np.empty(0, dtype=np.float64)
+        self.fy: np.ndarray = np.empty(0, dtype=np.int8)
+        self.capacity = capacity
+        #: outcomes held (the fitted window plus those waiting for the next refit)
         self.n = 0
         self.n_pos = 0
         self.n_fit = 0
+        #: outcomes ever added (held or evicted)
+        self.n_seen = 0
         self.kx: list[float] = []
         self.ky: list[float] = []
         self.base_rate = 0.5
         self.log_prior_odds = 0.0
-        self.conformal = ConformalSlice(alpha)
+        self.conformal = ConformalSlice(alpha, capacity)
 
     def add(self, c: float, y: int) -> None:
         self.c.append(c)
         self.y.append(y)
         self.n += 1
+        self.n_seen += 1
         self.n_pos += y
         self.conformal.pending.append(nonconformity(c, y))
 
@@ -105,10 +120,25 @@ class CalibrationSlice:
         if self.c:
             new_c = np.frombuffer(self.c, dtype=np.float64)
             new_y = np.frombuffer(self.y, dtype=np.int8)
-            self.sx, self.sy = merge_sorted(self.sx, new_c, (self.sy, new_y))
             self.c = array("d")
             self.y = array("b")
-        kx, ky = _isotonic_knots(self.sx, self.sy.astype(np.float64))
+            if self.capacity is not None:
+                self.fc, old_c, new_c, self.fy, old_y, new_y = slide_window(
+                    self.fc, new_c, self.capacity, (self.fy, new_y)
+                )
+                if len(old_c):
+                    pos = old_y.astype(bool)
+                    self.sx0 = remove_sorted(self.sx0, old_c[~pos])
+                    self.sx1 = remove_sorted(self.sx1, old_c[pos])
+            pos = new_y.astype(bool)
+            self.sx0 = merge_sorted(self.sx0, new_c[~pos])  # type: ignore[assignment]
+            self.sx1 = merge_sorted(self.sx1, new_c[pos])  # type: ignore[assignment]
+            self.n = len(self.sx0) + len(self.sx1)
+            self.n_pos = len(self.sx1)
+        x = np.concatenate((self.sx0, self.sx1))
+        yv = np.concatenate((np.zeros(len(self.sx0)), np.ones(len(self.sx1))))
+        order = np.argsort(x, kind="stable")  # two sorted runs: a linear merge
+        kx, ky = _isotonic_knots(x[order], yv[order])
         self.kx = kx.tolist()
         self.ky = ky.tolist()
         self.n_fit = self.n
@@ -156,7 +186,7 @@ class MondrianCalibrator:
     def _slice(self, key: tuple[str, str]) -> CalibrationSlice:
         s = self.slices.get(key)
         if s is None:
-            s = self.slices[key] = CalibrationSlice(self.alpha)
+            s = self.slices[key] = CalibrationSlice(self.alpha, self.config.buffer_size)
         return s
 
     def add(self, context: str, predicate: str, c: float, y: int) -> None:
@@ -175,7 +205,7 @@ class MondrianCalibrator:
         for key in ((context, predicate), ("*", predicate), _GLOBAL):
             s = slices.get(key)
             if s is None:
-                s = slices[key] = CalibrationSlice(alpha)
+                s = slices[key] = CalibrationSlice(alpha, cfg.buffer_size)
             conf = s.conformal
             if s.n_fit > 0 and key[0] != "*":
                 q = conf.threshold(conf.alpha_t) if conf.alpha_t > 0 else math.inf
@@ -186,6 +216,7 @@ class MondrianCalibrator:
             s.c.append(c)
             s.y.append(y)
             s.n += 1
+            s.n_seen += 1
             s.n_pos += y
             conf.pending.append(score)
             if s.n - s.n_fit >= max(min_refit, growth * s.n_fit) or s.n_fit == 0:
@@ -196,9 +227,12 @@ class MondrianCalibrator:
             if s.n and s.n_fit != s.n:
                 s.refit()
 
-    def n_outcomes(self, context: str = "*", predicate: str = "*") -> int:
+    def n_outcomes(self, context: str = "*", predicate: str = "*", *, seen: bool = False) -> int:
+        """Outcomes held in a slice (``seen=True``: ever added, including those slid out)."""
         s = self.slices.get((context, predicate))
-        return 0 if s is None else s.n
+        if s is None:
+            return 0
+        return s.n_seen if seen else s.n
 
     # --------------------------------------------------------------- queries
     def likelihood_ratio(self, c: float, context: str, predicate: str) -> tuple[float, float]:
@@ -265,6 +299,6 @@ class MondrianCalibrator:
 
     def summary(self) -> dict[str, Any]:
         return {
-            f"{k[0]}|{k[1]}": {"n": s.n, "base_rate": s.base_rate, "knots": len(s.kx), "alpha_t": s.conformal.alpha_t}
+            f"{k[0]}|{k[1]}": {"n": s.n, "n_seen": s.n_seen, "base_rate": s.base_rate, "knots": len(s.kx), "alpha_t": s.conformal.alpha_t}
             for k, s in sorted(self.slices.items())
         }

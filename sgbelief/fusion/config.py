@@ -29,6 +29,11 @@ class CalibrationConfig(_Frozen):
         description="odds Lambda_hat is measured against: the slice's base rate (Eq. 2) or the uniform prior Beta(1, 1)",
     )
     adaptive_gamma: float = Field(0.005, ge=0.0, lt=1.0, description="adaptive conformal step size")
+    buffer_size: int | None = Field(
+        262_144,
+        ge=16,
+        description="most recent verification outcomes kept per Mondrian slice (sliding window); null keeps all",
+    )
 
 
 class OverwriteConfig(_Frozen):

@@ -68,19 +68,24 @@ class ConformalSlice:
     New scores wait in ``pending`` (O(1) append); ``refresh`` merges them into the sorted
     numpy array ``sorted`` in O(n + k log k) (sort the k new ones, one linear merge), so the
     amortised cost per score stays O(log n) and memory is 8 bytes per score. Queries are
-    O(1) after a refresh. The adaptive variant updates alpha_t online:
+    O(1) after a refresh. With a ``capacity`` the slice is a sliding window over the most
+    recent ``capacity`` scores (the oldest are removed from the sorted view at the refresh that
+    pushes them out), so memory is bounded. The adaptive variant updates alpha_t online:
     alpha_{t+1} = alpha_t + gamma (alpha - err_t), err_t = 1 when y_t was not in the set.
     """
 
-    __slots__ = ("pending", "sorted", "n_sorted", "alpha_t", "n_err", "n_seen")
+    __slots__ = ("pending", "sorted", "n_sorted", "alpha_t", "n_err", "n_seen", "capacity", "fifo")
 
-    def __init__(self, alpha: float) -> None:
+    def __init__(self, alpha: float, capacity: int | None = None) -> None:
         self.pending: list[float] = []
         self.sorted: np.ndarray = np.empty(0, dtype=np.float64)
         self.n_sorted = 0
         self.alpha_t = alpha
         self.n_err = 0
         self.n_seen = 0
+        self.capacity = capacity
+        #: the scores of ``sorted`` in arrival order (kept only with a capacity)
+        self.fifo: np.ndarray = np.empty(0, dtype=np.float64)
 
     @property
     def n(self) -> int:
@@ -91,10 +96,15 @@ class ConformalSlice:
         self.pending.append(score)
 
     def refresh(self) -> None:
-        """Merge the pending scores into the sorted view."""
+        """Merge the pending scores into the sorted view (evicting the oldest beyond capacity)."""
         if self.pending:
-            self.sorted = merge_sorted(self.sorted, np.array(self.pending, dtype=np.float64))
+            new = np.array(self.pending, dtype=np.float64)
             self.pending = []
+            if self.capacity is not None:
+                self.fifo, evicted, new = slide_window(self.fifo, new, self.capacity)
+                if len(evicted):
+                    self.sorted = remove_sorted(self.sorted, evicted)
+            self.sorted = merge_sorted(self.sorted, new)
         self.n_sorted = len(self.sorted)
 
     def threshold(self, alpha: float) -> float:
@@ -102,6 +112,38 @@ class ConformalSlice:
 
     def coverage_of_rank(self, q: float) -> int:
         return int(np.searchsorted(self.sorted, q, side="right"))
+
+
+def slide_window(
+    fifo: np.ndarray, new: np.ndarray, capacity: int, *payload: tuple[np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, ...]:
+    """Append ``new`` to the arrival-ordered window ``fifo`` and keep its last ``capacity`` items.
+
+    Returns (window, evicted, admitted): ``evicted`` are the old items pushed out (to be removed
+    from the sorted views), ``admitted`` the tail of ``new`` that is kept (to be merged into them;
+    items of ``new`` older than the window are never merged). Each ``payload`` pair
+    (fifo_values, new_values) adds (window, evicted, admitted) of a parallel column.
+    """
+    drop = len(fifo) + len(new) - capacity
+    drop_old = min(max(drop, 0), len(fifo))
+    drop_new = max(drop - len(fifo), 0)
+    out: list[np.ndarray] = []
+    for old_col, new_col in ((fifo, new), *payload):
+        admitted = new_col[drop_new:]
+        out += [np.concatenate((old_col[drop_old:], admitted)), old_col[:drop_old], admitted]
+    return tuple(out)
+
+
+def remove_sorted(base: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Remove one occurrence of each of ``values`` (a sub-multiset of ``base``) from sorted ``base``, O(n + k log k)."""
+    if len(values) == 0:
+        return base
+    v = np.sort(values)
+    first = np.searchsorted(v, v, side="left")
+    pos = np.searchsorted(base, v, side="left") + (np.arange(len(v)) - first)
+    if pos[-1] >= len(base) or not np.array_equal(base[pos], v):
+        raise ValueError("remove_sorted: values are not a sub-multiset of the sorted buffer")
+    return np.delete(base, pos)
 
 
 def merge_sorted(base: np.ndarray, new: np.ndarray, *payload: tuple[np.ndarray, np.ndarray]) -> np.ndarray | tuple[np.ndarray, ...]:

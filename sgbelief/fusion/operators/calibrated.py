@@ -198,7 +198,7 @@ class CalibratedOperator(BaseOperator):
     def _pair_score(self, predicate: str, p: float, y: int) -> None:
         sl = self.pair_conformal_.get(predicate)
         if sl is None:
-            sl = self.pair_conformal_[predicate] = ConformalSlice(self.config.alpha)
+            sl = self.pair_conformal_[predicate] = ConformalSlice(self.config.alpha, self.config.calibration.buffer_size)
         sl.pending.append(nonconformity(p, y))
         n = sl.n_sorted + len(sl.pending)
         cfg = self.config.calibration
