@@ -3,6 +3,9 @@ report=False changes nothing but the report."""
 
 from __future__ import annotations
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from sgbelief.eval.batched import random_records
 from sgbelief.eval.replay import make_runs, to_event
 from sgbelief.fusion.calibration import MondrianCalibrator
@@ -50,3 +53,18 @@ def test_calibration_refits_logarithmic_and_buffer_sorted() -> None:
     s = cal.slices[("k", "p")]
     assert (s.sx0[1:] >= s.sx0[:-1]).all() and (s.sx1[1:] >= s.sx1[:-1]).all()
     assert len(s.sx0) + len(s.sx1) + len(s.c) == s.n
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.floats(0.05, 5000.0), st.floats(0.05, 5000.0), st.floats(0.0, 3.0), st.floats(0.0, 3.0), st.floats(1e-4, 2.0)
+)
+def test_revision_test_decision_equals_the_exact_kl(a: float, b: float, da: float, db: float, tau: float) -> None:
+    """The cheap KL estimate (lgamma + pure-Python digamma) never changes the revision decision."""
+    from scipy.special import betaln, digamma
+
+    from sgbelief.fusion.operators.calibrated import _digamma_estimate, revision_kl_exceeds
+
+    exact = betaln(a + da, b + db) - betaln(a, b) - da * digamma(a) - db * digamma(b) + (da + db) * digamma(a + b)
+    assert revision_kl_exceeds(a, b, da, db, tau) == (exact > tau)
+    assert abs(_digamma_estimate(a) - digamma(a)) < 1e-10 * max(1.0, abs(digamma(a)))

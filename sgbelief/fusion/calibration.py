@@ -84,10 +84,12 @@ class CalibrationSlice:
 
     __slots__ = (
         "c", "y", "sx0", "sx1", "fc", "fy", "capacity", "n", "n_pos", "n_fit", "n_seen",
-        "kx", "ky", "base_rate", "log_prior_odds", "conformal",
+        "kx", "ky", "base_rate", "log_prior_odds", "conformal", "min_refit", "refit_growth", "refit_gap",
     )
 
-    def __init__(self, alpha: float, capacity: int | None = None) -> None:
+    def __init__(
+        self, alpha: float, capacity: int | None = None, *, min_refit: int = 8, refit_growth: float = 0.1
+    ) -> None:
         self.c = array("d")
         self.y = array("b")
         self.sx0: np.ndarray = np.empty(0, dtype=np.float64)
@@ -106,6 +108,10 @@ class CalibrationSlice:
         self.base_rate = 0.5
         self.log_prior_odds = 0.0
         self.conformal = ConformalSlice(alpha, capacity)
+        self.min_refit = min_refit
+        self.refit_growth = refit_growth
+        #: refit once ``n - n_fit >= refit_gap`` = max(min_refit, refit_growth * n_fit) (0: never fitted)
+        self.refit_gap: float = 0
 
     def add(self, c: float, y: int) -> None:
         self.c.append(c)
@@ -142,6 +148,7 @@ class CalibrationSlice:
         self.kx = kx.tolist()
         self.ky = ky.tolist()
         self.n_fit = self.n
+        self.refit_gap = max(self.min_refit, self.refit_growth * self.n_fit)
         eps = 0.5 / (self.n + 1)
         pi = min(max(self.n_pos / self.n, eps), 1.0 - eps)
         self.base_rate = self.n_pos / self.n
@@ -165,8 +172,20 @@ class CalibrationSlice:
     def log_lr(self, c: float, reference: bool = True) -> float:
         """log Lambda_hat(c) of Eq. 2; ``reference=False`` keeps the calibrated posterior odds
         (base rate not divided out: odds against the uniform Beta(1, 1) prior)."""
+        kx, ky = self.kx, self.ky
+        i = bisect_right(kx, c)  # p_hat(c), inlined (hot path)
+        if i == 0:
+            p = ky[0]
+        elif i >= len(kx):
+            p = ky[-1]
+        else:
+            x0, x1 = kx[i - 1], kx[i]
+            p = ky[i] if x1 == x0 else ky[i - 1] + (ky[i] - ky[i - 1]) * (c - x0) / (x1 - x0)
         eps = 0.5 / (self.n_fit + 1)
-        p = min(max(self.p_hat(c), eps), 1.0 - eps)
+        if p < eps:
+            p = eps
+        elif p > 1.0 - eps:
+            p = 1.0 - eps
         lo = math.log(p / (1.0 - p))
         return lo - self.log_prior_odds if reference else lo
 
@@ -180,13 +199,19 @@ class MondrianCalibrator:
         self.slices: dict[tuple[str, str], CalibrationSlice] = {}
         self._log_lr_max = math.log(self.config.lr_max)
         self._ref = self.config.lr_reference == "slice"
+        self._gamma = self.config.adaptive_gamma
+        #: (slice, predicate pool, global pool) per (context, predicate)
+        self._levels: dict[tuple[str, str], tuple[CalibrationSlice, ...]] = {}
         self.frozen = False
 
     # ------------------------------------------------------------------ data
     def _slice(self, key: tuple[str, str]) -> CalibrationSlice:
         s = self.slices.get(key)
         if s is None:
-            s = self.slices[key] = CalibrationSlice(self.alpha, self.config.buffer_size)
+            cfg = self.config
+            s = self.slices[key] = CalibrationSlice(
+                self.alpha, cfg.buffer_size, min_refit=cfg.min_refit, refit_growth=cfg.refit_growth
+            )
         return s
 
     def add(self, context: str, predicate: str, c: float, y: int) -> None:
@@ -197,29 +222,27 @@ class MondrianCalibrator:
         """
         if self.frozen:
             return
-        cfg = self.config
-        gamma, alpha = cfg.adaptive_gamma, self.alpha
-        min_refit, growth = cfg.min_refit, cfg.refit_growth
+        levels = self._levels.get((context, predicate))
+        if levels is None:
+            keys = ((context, predicate), ("*", predicate), _GLOBAL)
+            levels = self._levels[(context, predicate)] = tuple(self._slice(k) for k in keys)
         score = nonconformity(c, y)  # Eq. 1, the same for the three levels
-        slices = self.slices
-        for key in ((context, predicate), ("*", predicate), _GLOBAL):
-            s = slices.get(key)
-            if s is None:
-                s = slices[key] = CalibrationSlice(alpha, cfg.buffer_size)
-            conf = s.conformal
-            if s.n_fit > 0 and key[0] != "*":
-                q = conf.threshold(conf.alpha_t) if conf.alpha_t > 0 else math.inf
-                err = 0 if score <= q else 1
-                conf.n_seen += 1
-                conf.n_err += err
-                conf.alpha_t += gamma * (alpha - err)
+        first = levels[0]
+        if first.n_fit > 0 and context != "*":
+            conf = first.conformal
+            q = conf.threshold(conf.alpha_t) if conf.alpha_t > 0 else math.inf
+            err = 0 if score <= q else 1
+            conf.n_seen += 1
+            conf.n_err += err
+            conf.alpha_t += self._gamma * (self.alpha - err)
+        for s in levels:
             s.c.append(c)
             s.y.append(y)
             s.n += 1
             s.n_seen += 1
             s.n_pos += y
-            conf.pending.append(score)
-            if s.n - s.n_fit >= max(min_refit, growth * s.n_fit) or s.n_fit == 0:
+            s.conformal.pending.append(score)
+            if s.n - s.n_fit >= s.refit_gap:
                 s.refit()
 
     def refit_all(self) -> None:
@@ -255,13 +278,21 @@ class MondrianCalibrator:
             lo = 1.0 / cfg.lr_max
             return (lo if lam < lo else cfg.lr_max if lam > cfg.lr_max else lam), kappa
         ref = self._ref
-        log_lr = g.log_lr(c, ref)  # type: ignore[union-attr]
-        if n_p:
-            lp = min(1.0, n_p / target)
-            log_lr = lp * p.log_lr(c, ref) + (1.0 - lp) * log_lr  # type: ignore[union-attr]
-        if n_s:
-            ls = min(1.0, n_s / target)
-            log_lr = ls * s.log_lr(c, ref) + (1.0 - ls) * log_lr  # type: ignore[union-attr]
+        # a level with full weight (n >= target_size) makes the coarser ones irrelevant:
+        # 1 * x + 0 * y == x, so they are not evaluated
+        if n_s >= target:
+            log_lr = s.log_lr(c, ref)  # type: ignore[union-attr]
+        else:
+            if n_p >= target:
+                log_lr = p.log_lr(c, ref)  # type: ignore[union-attr]
+            else:
+                log_lr = g.log_lr(c, ref)  # type: ignore[union-attr]
+                if n_p:
+                    lp = n_p / target
+                    log_lr = lp * p.log_lr(c, ref) + (1.0 - lp) * log_lr  # type: ignore[union-attr]
+            if n_s:
+                ls = n_s / target
+                log_lr = ls * s.log_lr(c, ref) + (1.0 - ls) * log_lr  # type: ignore[union-attr]
         m = self._log_lr_max
         if log_lr > m:
             log_lr = m

@@ -34,6 +34,8 @@ def conformal_quantile(sorted_scores: np.ndarray | list[float], alpha: float) ->
         return math.inf
     if rank < 1:
         return -math.inf
+    if isinstance(sorted_scores, np.ndarray):
+        return sorted_scores.item(rank - 1)
     return float(sorted_scores[rank - 1])
 
 

@@ -243,7 +243,6 @@ class ProvenanceStore:
         d_alpha: float,
         d_beta: float,
         status: EntryStatus = EntryStatus.COMMITTED,
-        *,
         stance: int = 0,
     ) -> ProvenanceEntry:
         """Append an entry; counted statuses update the belief, pending ones join their queue."""
@@ -418,32 +417,49 @@ class ProvenanceStore:
             return 0
         counted_ids = _COUNTED_IDS
         counted = [e for e in fold if id(e.status) in counted_ids]
-        d_alpha = math.fsum(e.d_alpha for e in counted)
-        d_beta = math.fsum(e.d_beta for e in counted)
-        n = sum(e.n_folded for e in fold)
-        t_max = max(e.t for e in fold)
+        d_alpha = math.fsum([e.d_alpha for e in counted])
+        d_beta = math.fsum([e.d_beta for e in counted])
+        n = sum([e.n_folded for e in fold])
+        t_max = max([e.t for e in fold])
         if bucket is None:
             first = fold[0]
-            bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, EntryStatus.COMPACTED, first.node, first.predicate)
+            bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, _COMPACTED, first.node, first.predicate)
             bucket.n_folded = n
         else:
             bucket.d_alpha = math.fsum((bucket.d_alpha, d_alpha))
             bucket.d_beta = math.fsum((bucket.d_beta, d_beta))
             bucket.n_folded += n
-            bucket.t = max(bucket.t, t_max)
+            if t_max > bucket.t:
+                bucket.t = t_max
+        by_event = self._by_event
+        gone: list[str] = []
         for entry in fold:
             entry.alive = False
             eid = entry.event_id
             if eid is not None:
-                bucket_list = self._by_event.get(eid)
-                if bucket_list is not None:
+                same_event = by_event.get(eid)
+                if same_event is not None:
+                    if len(same_event) == 1 and same_event[0] is entry:
+                        del by_event[eid]
+                        gone.append(eid)
+                        continue
                     try:
-                        bucket_list.remove(entry)
+                        same_event.remove(entry)
                     except ValueError:
                         pass
-                    if not bucket_list:
-                        del self._by_event[eid]
-                        self._remember_compacted(eid)
+                    if not same_event:
+                        del by_event[eid]
+                        gone.append(eid)
+        if gone and self.remember_compacted > 0:
+            self._compacted_ids.update(gone)
+            order = self._compacted_order
+            order.extend(gone)
+            excess = len(order) - self.remember_compacted
+            if excess > 0:
+                ids = self._compacted_ids
+                popleft = order.popleft
+                for _ in range(excess):
+                    ids.discard(popleft())
         log.entries = [bucket, *keep]
         self.n_compacted += len(fold)
         return len(fold)

@@ -111,9 +111,32 @@ class BaseOperator:
         tau_t = self.config.tau_t
         prov = graph.provenance
         record = prov.record
-        gnx = graph.nx
+        gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
         increment = self._increment
         pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
+        if not report:
+            # lean path: the verdict only feeds the report, so the channel is not consulted
+            n_targets = n_below = n_committed = 0
+            for node, mass in event.targets.items():
+                n_targets += 1
+                if mass <= tau_t:
+                    n_below += 1
+                    continue
+                if node not in gnx:
+                    graph.ensure_node(node)
+                inc = increment(graph, node, pred, c, mass)
+                if inc is not None:
+                    da, db = inc
+                    record(node, pred, eid, t, da, db, _COMMITTED, 1 if da > db else -1 if da < db else 0)
+                    n_committed += 1
+            stats = self.stats
+            stats["events"] += 1
+            stats["targets"] += n_targets
+            if n_below:
+                stats["below_tau_t"] += n_below
+            if n_committed:
+                stats["committed"] += n_committed
+            return UpdateReport(eid, t, pred, (), tuple(resolutions))
         label_of = channel.label if channel is not None else None
         verdict_of = self._verdict
         # the default verdict rule, inlined: one table lookup per target
