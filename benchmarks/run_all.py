@@ -1,7 +1,8 @@
 """Run every benchmark, one at a time, each in its own process; write benchmarks/RESULTS.md.
 
 Usage: .venv/bin/python benchmarks/run_all.py [--quick] [--only throughput,history,...]
-Sizes are flags of the individual scripts; ``--quick`` uses small ones (smoke run).
+Sizes are flags of the individual scripts; ``--quick`` uses small ones (smoke run). With ``--only``
+the other entries of the last full run (benchmarks/results.json) are kept, each with its own command.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ HERE = Path(__file__).resolve().parent
 FULL = {
     "throughput": ["bench_throughput.py", "--repeat", "2"],
     "history": ["bench_history.py", "--events", "1010000"],
-    "memory_comod": ["bench_memory.py", "--events", "2000000", "--operator", "comod"],
+    "memory_comod": ["bench_memory.py", "--events", "10000000", "--operator", "comod"],
     "memory_majority": ["bench_memory.py", "--events", "3000000", "--operator", "majority"],
     "large_map": ["bench_large_map.py", "--nodes", "100000"],
     "conceptgraphs": ["bench_conceptgraphs.py", "--frames", "3"],
@@ -48,6 +49,9 @@ def main() -> int:
     if args.only:
         plan = {k: v for k, v in plan.items() if k in args.only.split(",")}
     results = {}
+    previous = HERE / "results.json"
+    if args.only and not args.quick and previous.exists():
+        results = {k: v for k, v in json.loads(previous.read_text())["results"].items() if k in FULL}
     for name, cmd in plan.items():
         full = [sys.executable, str(HERE / cmd[0]), *cmd[1:], "--json"]
         print(f"[run_all] {name}: {' '.join(cmd)}", flush=True)
@@ -62,9 +66,10 @@ def main() -> int:
         results[name] = {"command": ".venv/bin/python benchmarks/" + " ".join(cmd), "wall_s": round(wall, 1), "result": data}
         print(f"[run_all] {name}: {wall:.1f}s", flush=True)
     m = machine()
+    results = {k: results[k] for k in FULL if k in results} | {k: v for k, v in results.items() if k not in FULL}
     lines = ["# sgbelief benchmark results", "",
              f"Command: `.venv/bin/python benchmarks/run_all.py{' --quick' if args.quick else ''}`"
-             + (f" `--only {args.only}`" if args.only else ""), "",
+             + (" (entries re-run one at a time with `--only`; each entry names its command)" if args.only else ""), "",
              f"Machine: nproc={m['nproc']}, CPU: {m['cpu']}, Python {m['python']}, {m['platform']}.",
              "The machine is shared (2 cores); figures are CPU-time based where the script says so.", ""]
     for name, r in results.items():
