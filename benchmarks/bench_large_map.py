@@ -1,87 +1,155 @@
-"""Large maps: build an N-node graph with 3 predicates, apply N events, save, load, run the named queries.
+"""Large maps: an N-node graph with 3 predicates, N events, JSON and binary save/load, every named query.
 
-Each step timed; save/load throughput in MB/s of the JSON file. Events use the batched majority
-engine (identical result to streaming) and, for comparison, the streaming engine on 10^5 events.
+Steps, each timed separately (wall seconds from ``perf_counter``; ``*_cpu_s`` is this process's
+CPU time from ``process_time``, the fairer figure on a shared machine):
 
-Usage: .venv/bin/python benchmarks/bench_large_map.py [--nodes 1000000] [--json]
+1. ``columns``: the event stream as columns (N events, one target each, 100 events per step);
+2. ``events_batched``: the N events applied with the *batched* (numpy wave) majority engine,
+   which gives the same graph and provenance as the streaming engine, compaction included;
+3. ``build_nodes``: geometry (bbox, scene, floor_z) on all N nodes;
+4. ``json_save`` / ``json_load``: the JSON format, MB/s of its own file;
+5. ``npz_save`` / ``npz_load``: the binary layout (:mod:`sgbelief.graph.binary`), its file size
+   and its JSON-equivalent throughput = JSON file size / binary time;
+6. every named compound query (``sgbelief.query.named``) on the binary-loaded graph, one timing
+   each (queries sharing a relation config share one engine, so the first of a group also pays
+   for the shared geometric relations).
+
+Usage: .venv/bin/python benchmarks/bench_large_map.py [--nodes 1000000] [--no-json] [--verify] [--json]
+(``--json`` prints one JSON line, last on stdout, for run_all.py.)
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
+import sys
 import tempfile
 import time
+from collections.abc import Callable
+from typing import Any
 
-import _common  # noqa: F401
+from _common import rss_mb
+
+
+class _Steps:
+    """Wall and CPU time of each step, printed as it finishes (to stderr)."""
+
+    def __init__(self) -> None:
+        self.out: dict[str, float] = {}
+
+    def run(self, name: str, fn: Callable[[], Any]) -> Any:
+        w0, c0 = time.perf_counter(), time.process_time()
+        result = fn()
+        self.out[f"{name}_s"] = time.perf_counter() - w0
+        self.out[f"{name}_cpu_s"] = time.process_time() - c0
+        print(f"  {name:<24} {self.out[f'{name}_s']:8.2f} s wall {self.out[f'{name}_cpu_s']:8.2f} s cpu   "
+              f"peak RSS {rss_mb()[1]:8.0f} MB", file=sys.stderr, flush=True)
+        return result
 
 
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--nodes", type=int, default=1_000_000)
-    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--no-json", action="store_true",
+                    help="skip the JSON save/load (then no JSON-equivalent MB/s is reported)")
+    ap.add_argument("--verify", action="store_true", help="check graph_to_dict(loaded) == graph_to_dict(original)")
+    ap.add_argument("--json", action="store_true", help="print one JSON line")
     args = ap.parse_args()
     import numpy as np
 
     from sgbelief.eval.batched import EventColumns, batched_replay
+    from sgbelief.fusion.compatibility import SubsumptionTable
     from sgbelief.graph.scene_graph import SceneGraph
     from sgbelief.query import QueryEngine, named_queries
 
+    wall0 = time.perf_counter()
     n = args.nodes
-    rng = np.random.default_rng(0)
-    steps = {}
+    steps = _Steps()
     preds = ["is_car", "is_pedestrian", "is_building"]
-    t0 = time.perf_counter()
-    # events: one per (node, predicate) pair on average, 100 per time step
-    k = rng.integers(0, 3 * n, size=n)
-    conf = np.round(rng.random(n), 4)
-    pair_keys = [(f"n{i:07d}", p) for i in range(n) for p in preds]
-    ev_pair = k.astype(np.int64)
-    cols = EventColumns(
-        event_ids=[f"e{i}" for i in range(n)], event_t=(np.arange(n) // 100).astype(np.int64), predicates=preds,
-        pairs=pair_keys, pair=ev_pair, event=np.arange(n, dtype=np.int64), mass=np.ones(n), conf=conf)
-    steps["columns_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    g, _stats = batched_replay(cols, "majority")
-    steps["events_batched_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for i in range(n):  # geometry for the queries (nodes without evidence get bare attributes)
-        node = f"n{i:07d}"
-        x, y = float(i % 1000) * 0.5, float(i // 1000) * 0.5
-        if node in g.nx:
-            g.nx.nodes[node].update(bbox=((x, y, 0.0), (x + 0.4, y + 0.4, 1.0)), scene=f"s{i // 1000:04d}", floor_z=0.0)
-        else:
-            g.add_node(node, bbox=((x, y, 0.0), (x + 0.4, y + 0.4, 1.0)), scene=f"s{i // 1000:04d}", floor_z=0.0)
-    steps["build_nodes_s"] = time.perf_counter() - t0
-    from sgbelief.fusion.compatibility import SubsumptionTable
 
+    def columns() -> EventColumns:
+        rng = np.random.default_rng(0)
+        k = rng.integers(0, 3 * n, size=n)  # one event per (node, predicate) pair on average
+        conf = np.round(rng.random(n), 4)
+        pair_keys = [(f"n{i:07d}", p) for i in range(n) for p in preds]
+        return EventColumns(
+            event_ids=[f"e{i}" for i in range(n)], event_t=(np.arange(n) // 100).astype(np.int64), predicates=preds,
+            pairs=pair_keys, pair=k.astype(np.int64), event=np.arange(n, dtype=np.int64), mass=np.ones(n), conf=conf)
+
+    cols = steps.run("columns", columns)
+    g, _stats = steps.run("events_batched", lambda: batched_replay(cols, "majority"))
+    del cols
+
+    def build_nodes() -> None:  # geometry for the queries (nodes without evidence get bare attributes)
+        for i in range(n):
+            node = f"n{i:07d}"
+            x, y = float(i % 1000) * 0.5, float(i // 1000) * 0.5
+            if node in g.nx:
+                g.nx.nodes[node].update(bbox=((x, y, 0.0), (x + 0.4, y + 0.4, 1.0)), scene=f"s{i // 1000:04d}",
+                                        floor_z=0.0)
+            else:
+                g.add_node(node, bbox=((x, y, 0.0), (x + 0.4, y + 0.4, 1.0)), scene=f"s{i // 1000:04d}", floor_z=0.0)
+
+    steps.run("build_nodes", build_nodes)
     # the named compounds span both shipped vocabularies: declare them (unseen pairs read as the prior)
     g.vocabulary = frozenset(SubsumptionTable.shipped("kitti360").predicates) | frozenset(
         SubsumptionTable.shipped("scannet").predicates)
-    with tempfile.TemporaryDirectory() as d:
-        path = os.path.join(d, "big.json")
-        t0 = time.perf_counter()
-        g.save(path)
-        steps["save_s"] = time.perf_counter() - t0
-        mb = os.path.getsize(path) / 1e6
-        t0 = time.perf_counter()
-        g2 = SceneGraph.load(path)
-        steps["load_s"] = time.perf_counter() - t0
-    assert len(g2) == len(g)
+    prov = g.provenance
+    res: dict[str, Any] = {
+        "bench": "large_map", "nodes": n, "predicates": 3, "events": n, "engine": "batched majority",
+        "pairs_with_evidence": len(prov), "log_entries": sum(len(log.entries) for log in prov._pairs.values()),
+        "compacted_entries": prov.n_compacted,
+    }
+    with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_TMP")) as d:
+        json_mb = None
+        if not args.no_json:
+            jpath = os.path.join(d, "big.json")
+            steps.run("json_save", lambda: g.save(jpath))
+            json_mb = os.path.getsize(jpath) / 1e6
+            g_json = steps.run("json_load", lambda: SceneGraph.load(jpath))
+            assert len(g_json) == len(g)
+            del g_json
+            gc.collect()
+            os.unlink(jpath)
+            res.update(json_mb=round(json_mb, 1), save_mb_per_s=round(json_mb / steps.out["json_save_s"], 1),
+                       load_mb_per_s=round(json_mb / steps.out["json_load_s"], 1))
+        bpath = os.path.join(d, "big.npz")
+        steps.run("npz_save", lambda: g.save(bpath))
+        npz_mb = os.path.getsize(bpath) / 1e6
+        g2 = steps.run("npz_load", lambda: SceneGraph.load(bpath))
+    res["npz_mb"] = round(npz_mb, 1)
+    if json_mb is not None:
+        for op in ("save", "load"):
+            res[f"npz_{op}_json_equiv_mb_per_s"] = round(json_mb / steps.out[f"npz_{op}_s"], 1)
+            res[f"npz_{op}_json_equiv_mb_per_s_cpu"] = round(json_mb / steps.out[f"npz_{op}_cpu_s"], 1)
+    assert len(g2) == len(g) and len(g2.provenance) == len(prov)
+    if args.verify:
+        from sgbelief.graph.persistence import graph_to_dict
+
+        res["verified_equal"] = steps.run("verify", lambda: graph_to_dict(g2) == graph_to_dict(g))
+        assert res["verified_equal"]
+    del g
+    gc.collect()
     queries = named_queries()
-    groups: dict[int, tuple[object, dict]] = {}
+    engines: dict[int, Any] = {}
+    query_s: dict[str, float] = {}
+    hits: dict[str, int] = {}
     for name, q in queries.items():
-        groups.setdefault(id(q.config), (q.config, {}))[1][name] = q.compound
-    t0 = time.perf_counter()
-    hits = {}
-    for cfg, comp in groups.values():
-        hits.update({k2: len(v) for k2, v in QueryEngine(g2, config=cfg).evaluate_many(comp).items()})
-    steps["queries_s"] = time.perf_counter() - t0
-    res = {"bench": "large_map", "nodes": n, "predicates": 3, "events": n, "pairs_with_evidence": len(g.provenance),
-           "json_mb": round(mb, 1), "save_mb_per_s": round(mb / steps["save_s"], 1),
-           "load_mb_per_s": round(mb / steps["load_s"], 1), "named_queries": len(queries),
-           **{k2: round(v, 2) for k2, v in steps.items()}}
+        engine = engines.get(id(q.config))
+        if engine is None:
+            engine = engines[id(q.config)] = QueryEngine(g2, config=q.config)
+        result = steps.run(f"query:{name}", lambda e=engine, q=q, name=name: e.evaluate(q.compound, name=name))
+        query_s[name] = round(steps.out[f"query:{name}_s"], 3)
+        hits[name] = len(result)
+    res["named_queries"] = len(queries)
+    res["queries_s"] = round(sum(steps.out[f"query:{k}_s"] for k in queries), 2)
+    res["query_s"] = query_s
+    res["query_hits"] = hits
+    res.update({k: round(v, 2) for k, v in steps.out.items() if not k.startswith("query:")})
+    res["peak_rss_mb"] = round(rss_mb()[1])
+    res["wall_s"] = round(time.perf_counter() - wall0, 1)
     print(json.dumps(res) if args.json else json.dumps(res, indent=1))
     return 0
 

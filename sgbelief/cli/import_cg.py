@@ -15,6 +15,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--context", default="conceptgraphs", help="context tag kappa of the events")
     parser.add_argument("--operator-config", default=None, help="operator config YAML")
     parser.add_argument("--out", default="results/import-cg", help="output directory (graph.json, labels.json)")
+    parser.add_argument("--graph-format", choices=["json", "npz"], default="json",
+                        help="save the graph as graph.json (default) or graph.npz (binary layout for large maps)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -26,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
     summary = import_file(args.result, backend)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    graph_path = backend.graph.save(out / "graph.json")
+    graph_path = backend.graph.save(out / f"graph.{args.graph_format}")
     (out / "labels.json").write_text(json.dumps(summary.labels, indent=2, default=str))
     changed = sum(1 for v in summary.labels.values() if v["belief"] != v["majority"])
     print(f"imported {summary.n_objects} objects, {summary.n_detections} detections, "

@@ -1,4 +1,4 @@
-"""``sgbelief inspect MAP_DIR [NODE]``: beliefs and provenance of a saved graph."""
+"""``sgbelief inspect MAP_DIR [NODE]``: beliefs and provenance of a saved graph (JSON or binary .npz)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("map_dir", type=Path, help="directory holding graph.json (or the .json file)")
+    p.add_argument("map_dir", type=Path,
+                   help="saved graph: a directory holding graph.json or graph.npz, or the .json / .npz file")
     p.add_argument("node", nargs="?", default=None, help="show one node's beliefs and full provenance")
     p.add_argument("--predicate", default=None, help="only this predicate")
     p.add_argument("--json", action="store_true", help="machine-readable output")

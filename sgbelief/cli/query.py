@@ -8,7 +8,8 @@ import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("map", metavar="MAP_DIR", help="saved graph: a directory holding graph.json, or a .json file")
+    parser.add_argument("map", metavar="MAP_DIR",
+                        help="saved graph: a directory holding graph.json or graph.npz, or a .json / .npz file")
     parser.add_argument("query", metavar="EXPR_OR_NAME",
                         help='e.g. "is_chair & is_near_window & !is_on_top_of", or a named query '
                              '("chair near window", chair_near_window; see configs/queries/)')

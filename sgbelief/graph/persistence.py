@@ -12,6 +12,10 @@ File layout (``format: sgbelief.scene_graph``, ``version: 1``)::
 The queues (revision quarantine Q, disagreement queue Q⊥) are the pending entries of the
 provenance log, so they round-trip with it. Loading validates the envelope with pydantic and
 checks Eq. 5 (stored belief = prior + logged increments) for every pair.
+
+:func:`save_graph` / :func:`load_graph` also dispatch to the columnar binary layout of
+:mod:`sgbelief.graph.binary` (``.npz``, ``format: sgbelief.scene_graph.npz``) by suffix or
+``format=``; JSON stays the default.
 """
 
 from __future__ import annotations
@@ -20,9 +24,9 @@ import json
 import math
 import os
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, BinaryIO, Literal
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
@@ -33,7 +37,10 @@ from sgbelief.graph.scene_graph import SceneGraph
 FORMAT = "sgbelief.scene_graph"
 VERSION = 1
 GRAPH_FILE = "graph.json"
-_TUPLE_ATTRS = ("centroid",)
+#: file name inside a map directory, by format
+GRAPH_FILES = {"json": GRAPH_FILE, "npz": "graph.npz"}
+_SUFFIX_FORMAT = {".json": "json", ".npz": "npz"}
+_ZIP_MAGIC = b"PK\x03\x04"
 
 
 class _Envelope(BaseModel):
@@ -47,10 +54,36 @@ class _Envelope(BaseModel):
     provenance: dict[str, Any]
 
 
-def resolve_graph_path(path: str | Path) -> Path:
-    """``x.json`` stays as is; anything else is a directory holding ``graph.json``."""
+def _check_format(format: str | None) -> None:
+    if format is not None and format not in GRAPH_FILES:
+        raise ValueError(f"format must be one of {sorted(GRAPH_FILES)}, got {format!r}")
+
+
+def resolve_graph_path(path: str | Path, format: str | None = None) -> Path:
+    """Where a graph is saved: ``x.json`` / ``x.npz`` stay as they are; anything else is a
+    directory holding ``graph.json`` (or ``graph.npz`` with ``format="npz"``)."""
+    return _resolve(path, format)[0]
+
+
+def _resolve(path: str | Path, format: str | None, *, loading: bool = False) -> tuple[Path, str]:
+    """(file, format) for a save or load; a file suffix that contradicts ``format`` is an error."""
+    _check_format(format)
     p = Path(path)
-    return p if p.suffix == ".json" else p / GRAPH_FILE
+    by_suffix = _SUFFIX_FORMAT.get(p.suffix)
+    if by_suffix is not None:
+        if format is not None and format != by_suffix:
+            raise ValueError(f"{p}: suffix {p.suffix} does not match format={format!r}")
+        return p, by_suffix
+    if format is not None:
+        return p / GRAPH_FILES[format], format
+    if loading:
+        found = [fmt for fmt, name in GRAPH_FILES.items() if (p / name).exists()]
+        if len(found) > 1:
+            raise FormatError(f"both {GRAPH_FILE} and {GRAPH_FILES['npz']} are present; pass format= or the file path",
+                              path=p)
+        if found:
+            return p / GRAPH_FILES[found[0]], found[0]
+    return p / GRAPH_FILE, "json"
 
 
 def _jsonable(value: Any, where: str) -> Any:
@@ -101,16 +134,24 @@ def graph_to_dict(graph: SceneGraph) -> dict[str, Any]:
 def atomic_write_text(path: str | Path, text: str | Iterable[str]) -> None:
     """Write text (a string or an iterable of chunks) atomically: temp file in the same directory,
     fsync, rename. Readers never see a partial file; on error the old file is left untouched."""
+
+    def write(fh: BinaryIO) -> None:
+        chunks = [text] if isinstance(text, str) else text
+        for chunk in chunks:
+            fh.write(chunk.encode("utf-8"))
+
+    atomic_write_binary(path, write)
+
+
+def atomic_write_binary(path: str | Path, write: Callable[[BinaryIO], None]) -> None:
+    """Call ``write(fh)`` on a temp file in the same directory, fsync, rename over ``path``.
+    Readers never see a partial file; on error the old file is left untouched."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            if isinstance(text, str):
-                fh.write(text)
-            else:
-                for chunk in text:
-                    fh.write(chunk)
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
@@ -122,12 +163,31 @@ def atomic_write_text(path: str | Path, text: str | Iterable[str]) -> None:
         raise
 
 
-def save_graph(graph: SceneGraph, path: str | Path) -> Path:
-    """Serialise first (so an unserialisable attribute fails before touching disk), then write atomically."""
-    target = resolve_graph_path(path)
+def save_graph(graph: SceneGraph, path: str | Path, *, format: str | None = None) -> Path:
+    """Serialise first (so an unserialisable attribute fails before touching disk), then write atomically.
+
+    ``format``: ``"json"`` (default) or ``"npz"`` (the binary layout of :mod:`sgbelief.graph.binary`);
+    by default a ``.npz`` suffix selects the binary layout.
+    """
+    target, fmt = _resolve(path, format)
+    if fmt == "npz":
+        from sgbelief.graph.binary import save_graph_npz
+
+        return save_graph_npz(graph, target)
     text = json.dumps(graph_to_dict(graph), separators=(",", ":"), allow_nan=False)
     atomic_write_text(target, text)
     return target
+
+
+def restore_node_attr(key: str, value: Any) -> Any:
+    """Node attributes the API stores as tuples (``centroid``, ``bbox``) come back as tuples of float."""
+    if value is None:
+        return None
+    if key == "centroid":
+        return tuple(float(x) for x in value)
+    if key == "bbox":
+        return tuple(tuple(float(x) for x in corner) for corner in value)
+    return value
 
 
 def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGraph:
@@ -150,11 +210,9 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGrap
             n = attrs.pop("id")
             if isinstance(n, bool) or not isinstance(n, (str, int)):
                 raise FormatError(f"field 'graph.nodes[{i}].id' must be a string or integer", path=source)
-            for key in _TUPLE_ATTRS:
-                if attrs.get(key) is not None:
-                    attrs[key] = tuple(float(x) for x in attrs[key])
-            if attrs.get("bbox") is not None:
-                attrs["bbox"] = tuple(tuple(float(x) for x in corner) for corner in attrs["bbox"])
+            for key in ("centroid", "bbox"):
+                if key in attrs:
+                    attrs[key] = restore_node_attr(key, attrs[key])
             g.add_node(n, **attrs)
         for i, edge in enumerate(env.graph["edges"]):
             attrs = dict(edge)
@@ -176,11 +234,23 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGrap
     return graph
 
 
-def load_graph(path: str | Path) -> SceneGraph:
-    """Read a saved graph; truncated, edited or hostile JSON raises FormatError (line and field)."""
-    target = resolve_graph_path(path)
+def load_graph(path: str | Path, *, format: str | None = None) -> SceneGraph:
+    """Read a saved graph; truncated, edited or hostile files raise FormatError (line / array and field).
+
+    A directory holds ``graph.json`` or ``graph.npz``; a file's suffix selects its format unless
+    ``format`` is given.
+    """
+    target, fmt = _resolve(path, format, loading=True)
     if not target.exists():
         raise FileNotFoundError(f"no saved scene graph at {target}")
+    if fmt == "npz":
+        from sgbelief.graph.binary import load_graph_npz
+
+        return load_graph_npz(target)
+    with open(target, "rb") as fh:
+        if fh.read(4) == _ZIP_MAGIC:
+            raise FormatError("this is a binary (npz) scene graph, not JSON; name it .npz or pass format='npz'",
+                              path=target)
     try:
         with open(target, encoding="utf-8") as fh:
             doc = json.load(fh)
@@ -193,4 +263,13 @@ def load_graph(path: str | Path) -> SceneGraph:
     return graph_from_dict(doc, source=str(target))
 
 
-__all__ = ["save_graph", "load_graph", "graph_to_dict", "graph_from_dict", "atomic_write_text", "resolve_graph_path"]
+__all__ = [
+    "save_graph",
+    "load_graph",
+    "graph_to_dict",
+    "graph_from_dict",
+    "atomic_write_text",
+    "atomic_write_binary",
+    "resolve_graph_path",
+    "restore_node_attr",
+]

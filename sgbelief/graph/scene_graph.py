@@ -221,18 +221,24 @@ class SceneGraph:
         g.remove_node(absorb)
 
     # ----------------------------------------------------------- persistence
-    def save(self, path: str | Path) -> Path:
-        """Save losslessly as versioned JSON (atomic). A directory path gets ``graph.json``."""
+    def save(self, path: str | Path, *, format: str | None = None) -> Path:
+        """Save losslessly and atomically; returns the file written.
+
+        ``format="json"`` (the default; a directory path gets ``graph.json``) or ``"npz"``, the
+        columnar binary layout for large maps (a directory path gets ``graph.npz``). A ``.json`` /
+        ``.npz`` suffix selects the format when ``format`` is not given.
+        """
         from sgbelief.graph.persistence import save_graph
 
-        return save_graph(self, path)
+        return save_graph(self, path, format=format)
 
     @classmethod
-    def load(cls, path: str | Path) -> SceneGraph:
-        """Load a graph written by :meth:`save`; malformed or edited files raise FormatError."""
+    def load(cls, path: str | Path, *, format: str | None = None) -> SceneGraph:
+        """Load a graph written by :meth:`save` (format from the suffix, or the file found in a
+        directory); malformed, truncated or edited files raise FormatError."""
         from sgbelief.graph.persistence import load_graph
 
-        return load_graph(path)
+        return load_graph(path, format=format)
 
     def query(self, expr: Any, **kwargs: Any) -> Any:
         """Answer a compound query (see :mod:`sgbelief.query`)."""
