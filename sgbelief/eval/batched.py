@@ -7,28 +7,31 @@ wave j holds the j-th entry of every (v, phi) pair, so the pairs of one wave are
 the wave is one numpy operation. Every pair still sees its increments in stream order, so the
 running (alpha, beta) are bit-identical to the streaming ones.
 
-Provenance is rebuilt exactly as the streaming store would hold it at the end of the stream:
-entries older than the last compaction horizon are folded into one ``compacted`` bucket per
-pair with the same staged ``math.fsum`` (one fold per T_prov epoch), newer entries are
-materialised as :class:`ProvenanceEntry` objects in arrival order, and the node order, pair
-order, clock, compaction epoch and operator stats match. The only difference is the *order* in
-which the bounded "recently compacted ids" memory was filled within one compaction (the
-streaming store follows a set's iteration order there); its contents are the same.
+The provenance store is rebuilt exactly as the streaming store holds it at the end of the
+stream, and only what survives compaction becomes Python objects: one ``compacted`` bucket per
+pair (the staged ``math.fsum`` of the store reproduced in numpy, :func:`_stage_sums`), the live
+entries of the last T_prov steps (logs, event index, timeline) and the bounded memory of
+compacted event ids, filled in the order the streaming store fills it (:func:`_remember`).
+Node order, pair order, clock, compaction epoch and operator stats match too
+(tests/test_batched.py compares everything, floats bit for bit).
 
 ``cal`` / ``comod`` are not batched: their increments depend on a calibration buffer shared by
 all pairs, which every outcome changes, so events cannot be reordered across pairs.
 
 Usage::
 
-    cols = EventColumns.from_records(records)        # columnarise once (Python loop)
+    cols = EventColumns.from_records(records)        # columnarise once
     graph, stats = batched_replay(cols, "majority", vocabulary)
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from itertools import chain, repeat
+from operator import attrgetter
 from typing import Any
 
 import numpy as np
@@ -37,18 +40,28 @@ from sgbelief.errors import UnknownPredicateError
 from sgbelief.eval.formats import EventRecord
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig, resolve_config
-from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, _PairLog
+from sgbelief.gc_tuning import relaxed_gc
+from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore, _PairLog
 from sgbelief.graph.scene_graph import SceneGraph
 
 BATCHED_OPERATORS = ("majority", "naive_bayes", "overwrite")
+
+
+class _FirstSeen(dict):  # type: ignore[type-arg]
+    """key -> dense code, assigned in first-lookup order (``map(index.__getitem__, keys)`` runs in C)."""
+
+    def __missing__(self, key: Any) -> int:
+        code = self[key] = len(self)
+        return code
 
 
 @dataclass
 class EventColumns:
     """A stream as flat arrays, one row per (event, target) entry, in stream order.
 
-    ``pair`` indexes ``pairs`` ((node, predicate) in first-appearance order); ``event`` indexes
-    ``event_ids`` / ``event_t``.
+    ``pair`` indexes ``pairs`` (distinct (node, predicate) keys, in any order); ``event``
+    indexes ``event_ids`` / ``event_t``. ``unique_ids`` records whether no event id repeats
+    (``from_records`` checks it once per stream; None: each replay checks it).
     """
 
     event_ids: list[str]
@@ -59,61 +72,317 @@ class EventColumns:
     event: np.ndarray  # int64, per entry
     mass: np.ndarray  # float64, per entry
     conf: np.ndarray  # float64, per entry
+    unique_ids: bool | None = None
 
     @property
     def n_events(self) -> int:
         return len(self.event_ids)
 
     @classmethod
+    @relaxed_gc()
     def from_records(cls, records: Iterable[EventRecord]) -> EventColumns:
-        """Columnarise records; ids default to ``line<n>`` (1-based) as in the streaming replay."""
-        ids: list[str] = []
-        ts: list[int] = []
-        pair_index: dict[tuple[Any, str], int] = {}
-        pairs: list[tuple[Any, str]] = []
-        preds: dict[str, None] = {}
-        p_col: list[int] = []
-        e_col: list[int] = []
-        m_col: list[float] = []
-        c_col: list[float] = []
-        for i, rec in enumerate(records):
-            ids.append(rec.id or f"line{i + 1}")
-            ts.append(rec.t)
-            pred, c = rec.predicate, rec.confidence
-            preds.setdefault(pred, None)
-            for node, mass in rec.targets.items():
-                key = (node, pred)
-                k = pair_index.get(key)
-                if k is None:
-                    k = pair_index[key] = len(pairs)
-                    pairs.append(key)
-                p_col.append(k)
-                e_col.append(i)
-                m_col.append(mass)
-                c_col.append(c)
-        return cls(
-            ids, np.asarray(ts, dtype=np.int64), list(preds), pairs,
-            np.asarray(p_col, dtype=np.int64), np.asarray(e_col, dtype=np.int64),
-            np.asarray(m_col, dtype=np.float64), np.asarray(c_col, dtype=np.float64),
-        )
+        """Columnarise records; ids default to ``line<n>`` (1-based) as in the streaming replay.
+
+        Every per-record or per-target step is a C-level ``map``/``fromiter`` pass (no Python
+        loop body); pair codes come from dense (node, predicate) codes.
+        """
+        recs = records if isinstance(records, (list, tuple)) else list(records)
+        n = len(recs)
+        event_t = np.fromiter(map(attrgetter("t"), recs), dtype=np.int64, count=n)
+        conf_ev = np.fromiter(map(attrgetter("confidence"), recs), dtype=np.float64, count=n)
+        targets = list(map(attrgetter("targets"), recs))
+        ids = list(map(attrgetter("id"), recs))
+        if not all(ids):  # missing ids, named as replay() names them
+            ids = [eid or f"line{i}" for i, eid in enumerate(ids, 1)]
+        n_targets = np.fromiter(map(len, targets), dtype=np.int64, count=n)
+        m = int(n_targets.sum())
+        node_index, pred_index = _FirstSeen(), _FirstSeen()
+        node = np.fromiter(map(node_index.__getitem__, chain.from_iterable(targets)), dtype=np.int64, count=m)
+        pred_ev = np.fromiter(map(pred_index.__getitem__, map(attrgetter("predicate"), recs)), dtype=np.int64, count=n)
+        mass = np.fromiter(chain.from_iterable(map(dict.values, targets)), dtype=np.float64, count=m)
+        event = np.repeat(np.arange(n, dtype=np.int64), n_targets)
+        n_pred = max(len(pred_index), 1)
+        code = node * n_pred + pred_ev[event]
+        space = len(node_index) * n_pred
+        if space <= 4 * m + 1024:  # a dense table of the codes in use
+            used = np.bincount(code, minlength=space) > 0
+            pair = (np.cumsum(used) - 1)[code]
+            uniq = np.flatnonzero(used)
+        else:
+            uniq, pair = np.unique(code, return_inverse=True)
+        nodes, preds = list(node_index), list(pred_index)
+        pairs = [(nodes[u // n_pred], preds[u % n_pred]) for u in uniq.tolist()]
+        return cls(ids, event_t, preds, pairs, pair.astype(np.int64, copy=False), event, mass, conf_ev[event],
+                   len(set(ids)) == n)
+
+
+# ------------------------------------------------------------------ numpy helpers
+def _stable_argsort(keys: np.ndarray, n_keys: int) -> np.ndarray:
+    """Stable argsort of non-negative int keys < n_keys, by 16-bit radix passes when they fit."""
+    if n_keys <= 1 << 16:
+        return np.argsort(keys.astype(np.uint16), kind="stable")
+    if n_keys <= 1 << 32:
+        lo = np.argsort((keys & 0xFFFF).astype(np.uint16), kind="stable")
+        hi = np.argsort((keys[lo] >> 16).astype(np.uint16), kind="stable")
+        return lo[hi]
+    return np.argsort(keys, kind="stable")
+
+
+def _starts(keys: np.ndarray) -> np.ndarray:
+    """Indices where a run of equal consecutive keys begins."""
+    if len(keys) == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+
+
+class _Waves:
+    """Elements grouped into rows (element order kept within a row), visited wave by wave.
+
+    Rows are ranked longest first (``rows``) and ``order`` lists the elements row by row in that
+    rank order, so wave j (the j-th element of every row that has one) covers the first
+    ``width[j]`` rows and sits at ``order[start[:width[j]] + j]``.
+    """
+
+    def __init__(self, row: np.ndarray, n_rows: int, *, contiguous: bool = False) -> None:
+        """``contiguous``: each row's elements are already adjacent (rows in any order), ``order`` is then None."""
+        if contiguous:
+            first = _starts(row)
+            ids, size = row[first], np.diff(np.r_[first, len(row)])
+        else:
+            sizes = np.bincount(row, minlength=n_rows)
+            ids = np.flatnonzero(sizes)
+            size = sizes[ids]
+        longest = int(size.max(initial=0))
+        rank = _stable_argsort(longest - size, longest + 1)
+        self.rows = ids[rank]
+        size = size[rank]
+        self.order: np.ndarray | None
+        if contiguous:
+            self.order, self.start = None, first[rank]
+        else:
+            rank_of = np.empty(n_rows, dtype=np.int64)
+            rank_of[self.rows] = np.arange(len(self.rows))
+            self.order = _stable_argsort(rank_of[row], len(self.rows))
+            self.start = np.cumsum(size) - size
+        self.width: list[int] = np.searchsorted(-size, -np.arange(longest), side="left").tolist()
+
+    def arrange(self, values: np.ndarray) -> np.ndarray:
+        """``values`` (one per element) in ``order``."""
+        return values if self.order is None else values[self.order]
+
+    def running_sums(self, columns: Sequence[np.ndarray], start: Sequence[float]) -> list[np.ndarray]:
+        """Per column and row (``rows`` order): ``start`` + the row's values added one by one, left to right."""
+        vals = [self.arrange(c) for c in columns]
+        accs = [np.full(len(self.rows), s) for s in start]
+        first = self.start
+        for j, w in enumerate(self.width):
+            at = first[:w] + j
+            for acc, v in zip(accs, vals):
+                acc[:w] += v[at]
+        return accs
 
 
 def _increments(op: str, cfg: OperatorConfig, mass: np.ndarray, conf: np.ndarray,
-                alpha: np.ndarray, beta: np.ndarray, a0: float, b0: float) -> tuple[np.ndarray, np.ndarray]:
-    """One wave's (d_alpha, d_beta), with the same floating-point expressions as the operators."""
+                waves: _Waves, a0: float, b0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(d_alpha, d_beta) per entry and final (alpha, beta) per row of ``waves``, with the same
+    floating-point expressions, in the same per-pair order, as the operators."""
+    if op == "overwrite":  # the increment depends on the pair's current belief: wave by wave
+        s = cfg.baselines.overwrite.strength
+        claim = waves.arrange(conf >= 0.5)
+        ta, tb = np.where(claim, a0 + s, a0), np.where(claim, b0, b0 + s)
+        alpha, beta = np.full(len(waves.rows), a0), np.full(len(waves.rows), b0)
+        da_w, db_w = np.empty(len(ta)), np.empty(len(ta))
+        for j, w in enumerate(waves.width):
+            at = waves.start[:w] + j
+            d_a, d_b = ta[at] - alpha[:w], tb[at] - beta[:w]
+            da_w[at], db_w[at] = d_a, d_b
+            alpha[:w] += d_a
+            beta[:w] += d_b
+        da, db = np.empty(len(ta)), np.empty(len(ta))
+        da[waves.order], db[waves.order] = da_w, db_w
+        return da, db, alpha, beta
     if op == "majority":
-        return mass * conf, mass * (1.0 - conf)
-    if op == "naive_bayes":
+        da, db = mass * conf, mass * (1.0 - conf)
+    else:
         r = cfg.baselines.naive_bayes.reliability
         p = r * conf + (1.0 - r) * (1.0 - conf)
-        return mass * p, mass * (1.0 - p)
-    s = cfg.baselines.overwrite.strength
-    pos = conf >= 0.5
-    ta = np.where(pos, a0 + s, a0)
-    tb = np.where(pos, b0, b0 + s)
-    return ta - alpha, tb - beta
+        da, db = mass * p, mass * (1.0 - p)
+    alpha, beta = waves.running_sums((da, db), (a0, b0))
+    return da, db, alpha, beta
 
 
+def _stage_sums(values: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """``math.fsum`` of each group ``values[starts[g]:starts[g] + sizes[g]]``, bit for bit.
+
+    fsum is the correctly rounded exact sum (a zero sum is +0.0). A float addition is correctly
+    rounded too, so groups of one or two values are done in numpy (``+ 0.0`` turns -0.0 into
+    fsum's +0.0); only groups of three or more go through ``math.fsum``.
+    """
+    out = values[starts] + 0.0
+    two = sizes == 2
+    out[two] += values[starts[two] + 1]
+    big = np.flatnonzero(sizes >= 3)
+    if len(big):
+        vals = values[np.repeat(sizes >= 3, sizes)].tolist()
+        ends = np.cumsum(sizes[big]).tolist()
+        fsum = math.fsum
+        out[big] = [fsum(vals[a:b]) for a, b in zip([0, *ends[:-1]], ends)]
+    return out
+
+
+# ------------------------------------------------------------------ event-id bookkeeping
+@dataclass
+class _IdRuns:
+    """The events that recorded entries, regrouped by event id (ids may repeat), stream order
+    within an id, with the life cycle of each id's list in ``ProvenanceStore._by_event``."""
+
+    events: np.ndarray  # event index
+    first_entry: np.ndarray  # index of the event's first entry (its entries are contiguous)
+    fold: np.ndarray  # compaction that folds the event's entries (n_compactions: never)
+    run: np.ndarray  # run number: the events of one id folded by one compaction share a run
+    emptied: np.ndarray  # folding this event empties its id's list (the id is remembered)
+    creator: np.ndarray  # event whose record created the id's list this event joined
+    unique: bool  # every event id is distinct
+
+    @classmethod
+    def build(cls, cols: EventColumns, ev: np.ndarray, fold_k: np.ndarray, opens: np.ndarray) -> _IdRuns:
+        first_entry = _starts(ev)
+        events = ev[first_entry]
+        ids = cols.event_ids
+        unique = cols.unique_ids if cols.unique_ids is not None else len(set(ids)) == len(ids)
+        if unique:
+            code = events
+        else:
+            index = _FirstSeen()
+            code = np.fromiter(map(index.__getitem__, ids), dtype=np.int64, count=len(ids))[events]
+            order = _stable_argsort(code, len(index))
+            events, first_entry, code = events[order], first_entry[order], code[order]
+        fold = fold_k[first_entry]
+        new_id = np.r_[True, code[1:] != code[:-1]]
+        same_id_next = np.r_[~new_id[1:], False]
+        next_event = np.r_[events[1:], 0]
+        opened = np.r_[opens, np.iinfo(np.int64).max][fold]  # the event that ran the folding compaction
+        # the list empties unless a later event of the id was recorded before that compaction
+        emptied = (fold < len(opens)) & (~same_id_next | (next_event >= opened))
+        creates = new_id | np.r_[False, emptied[:-1]]
+        run = np.cumsum(new_id | np.r_[True, fold[1:] != fold[:-1]]) - 1
+        creator = events[np.maximum.accumulate(np.where(creates, np.arange(len(events)), 0))]
+        return cls(events, first_entry, fold, run, emptied, creator, unique)
+
+
+def _visit_positions(pairs: list[tuple[Any, str]], block_pairs: np.ndarray, block_ends: list[int]) -> np.ndarray:
+    """Per block of distinct pair ids (in first-appearance order), each pair's position when a
+    ``set`` of their keys built by adding them in that order is iterated: the order in which
+    :meth:`ProvenanceStore.compact` visits its dirty pairs (a set's iteration order depends only
+    on the hashes and on the order in which they were added)."""
+    pid = block_pairs.tolist()
+    keys = list(map(pairs.__getitem__, pid))
+    seen = np.zeros(len(pairs), dtype=bool)
+    seen[block_pairs] = True
+    distinct = np.flatnonzero(seen).tolist()
+    pair_of = dict(zip(map(pairs.__getitem__, distinct), distinct))
+    visited: list[int] = []
+    begin = 0
+    for end in block_ends:
+        visited.extend(map(pair_of.__getitem__, set(keys[begin:end])))
+        begin = end
+    order = np.array(visited, dtype=np.int64)
+    slot = np.empty(len(pairs), dtype=np.int64)
+    out = np.empty(len(pid), dtype=np.int64)
+    begin = 0
+    for end in block_ends:
+        slot[order[begin:end]] = np.arange(end - begin)
+        out[begin:end] = slot[block_pairs[begin:end]]
+        begin = end
+    return out
+
+
+def _remember(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, pair: np.ndarray, ev: np.ndarray,
+              fold_k: np.ndarray, n_fold: int) -> None:
+    """Fill the bounded memory of compacted event ids exactly as the streaming store does.
+
+    Compaction k visits its dirty pairs in the iteration order of a set built from them in
+    stream order and folds each pair's entries in log order; an id is released when the last
+    live entry of its list is folded. Only the compactions whose ids stay in the memory need that
+    visiting order (with repeated ids, all of them: the store's set discards depend on the
+    whole sequence).
+    """
+    cap = prov.remember_compacted
+    unit_fold = idr.fold[idr.emptied]  # one released id per emptied list
+    n_rem = len(unit_fold)
+    if cap <= 0 or n_rem == 0:
+        return
+    k0 = int(np.sort(unit_fold)[n_rem - cap]) if (idr.unique and n_rem > cap) else 0
+    lo = int(np.searchsorted(fold_k[:n_fold], k0, side="left"))  # entries folded from compaction k0 on
+    n_sc = n_fold - lo
+    sc_pair, sc_fold = pair[lo:n_fold], fold_k[lo:n_fold]
+    # (pair, compaction) groups of those entries and, per compaction, the visiting order of its pairs
+    by_pair = _stable_argsort(sc_pair, len(cols.pairs))
+    gp, gk = sc_pair[by_pair], sc_fold[by_pair]
+    g_start = np.flatnonzero(np.r_[True, (gp[1:] != gp[:-1]) | (gk[1:] != gk[:-1])])
+    group_of = np.empty(n_sc, dtype=np.int64)
+    group_of[by_pair] = np.repeat(np.arange(len(g_start)), np.diff(np.r_[g_start, n_sc]))
+    is_first = np.zeros(n_sc, dtype=bool)
+    is_first[by_pair[g_start]] = True
+    firsts = np.flatnonzero(is_first)  # each group's first entry, in stream order
+    grp = group_of[firsts]
+    block_ends = np.r_[_starts(sc_fold[firsts])[1:], len(firsts)].tolist()
+    visit = np.empty(len(g_start), dtype=np.int64)
+    visit[grp] = _visit_positions(cols.pairs, gp[g_start][grp], block_ends)
+    # an entry is folded at (visit position of its pair, stream position); an event with the
+    # latest of its entries (they are contiguous); an id with the latest event of its run
+    entry_key = visit[group_of] * n_sc + np.arange(n_sc)
+    ev_start = _starts(ev[lo:n_fold])
+    key_at = np.zeros(n_sc, dtype=np.int64)
+    key_at[ev_start] = np.maximum.reduceat(entry_key, ev_start)
+    in_scope = (idr.first_entry >= lo) & (idr.first_entry < n_fold)
+    ev_key = np.where(in_scope, key_at[np.clip(idr.first_entry - lo, 0, n_sc - 1)], 0)
+    unit_key = np.maximum.reduceat(ev_key, _starts(idr.run))[idr.run[idr.emptied]]
+    sel = unit_fold >= k0
+    unit_key, unit_fold = unit_key[sel], unit_fold[sel] - k0
+    stride = int(unit_key.max()) + 1
+    if int(unit_fold.max()) < (1 << 62) // stride:  # one int64 sort key: (compaction, key)
+        order = np.argsort(unit_fold * stride + unit_key)
+    else:
+        order = np.lexsort((unit_key, unit_fold))
+    released_events = idr.events[idr.emptied][sel][order]
+    memory, remembered = prov._compacted_order, prov._compacted_ids
+    if idr.unique:
+        tail = list(map(cols.event_ids.__getitem__, released_events[-cap:].tolist()))
+        memory.extend(tail)
+        remembered.update(tail)
+        return
+    seq = list(map(cols.event_ids.__getitem__, released_events.tolist()))
+    # repeated ids: mirror the store, which adds the ids one pair's fold releases as a batch and
+    # then trims the memory to its bound
+    batch = unit_fold[order] * (stride // n_sc + 1) + unit_key[order] // n_sc
+    bounds = np.r_[_starts(batch), len(batch)].tolist()
+    for begin, end in zip(bounds[:-1], bounds[1:]):
+        released = seq[begin:end]
+        remembered.update(released)
+        memory.extend(released)
+        for _ in range(len(memory) - cap):
+            remembered.discard(memory.popleft())
+
+
+def _index_live(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, ev: np.ndarray, n_fold: int,
+                live: list[ProvenanceEntry]) -> None:
+    """``_by_event`` of the live entries: per id, in the order the id's current list was created."""
+    live_ev = ev[n_fold:]
+    creator_of = np.empty(cols.n_events, dtype=np.int64)
+    creator_of[idr.events] = idr.creator
+    key = creator_of[live_ev]
+    order = np.argsort(key, kind="stable")
+    bounds = np.r_[_starts(key[order]), len(key)].tolist()
+    owners = live_ev[order][bounds[:-1]].tolist()
+    ordered = live if idr.unique else [live[i] for i in order.tolist()]
+    by_event, ids = prov._by_event, cols.event_ids
+    for owner, begin, end in zip(owners, bounds[:-1], bounds[1:]):
+        by_event[ids[owner]] = ordered[begin:end]
+
+
+# ------------------------------------------------------------------ replay
+@relaxed_gc()
 def batched_replay(
     cols: EventColumns,
     operator: str,
@@ -121,17 +390,33 @@ def batched_replay(
     config: OperatorConfig | dict[str, Any] | None = None,
     *,
     strict: bool = True,
+    graph: SceneGraph | None = None,
+    timings: dict[str, float] | None = None,
 ) -> tuple[SceneGraph, dict[str, int]]:
     """Replay ``cols`` through a count-based baseline in waves; returns (graph, operator stats)
-    equal to what ``make_runs([operator], vocabulary, config)`` + the streaming replay produce."""
+    equal to what ``make_runs([operator], vocabulary, config)`` + the streaming replay produce.
+
+    ``graph``: an empty graph to fill instead (its vocabulary, prior and compacted-id memory
+    bound apply; ``vocabulary``/``strict`` are then ignored). ``timings``: receives the CPU
+    seconds of the phases ``apply`` (schedule, belief waves), ``fold`` (compacted buckets, in
+    numpy), ``objects`` (nodes, logs, entries, event index) and ``memory`` (compacted ids).
+    Needs non-decreasing event times (as in an events file); raises ValueError otherwise.
+    """
+    lap = _Laps(timings)
     if operator not in BATCHED_OPERATORS:
         raise ValueError(f"batched replay supports {BATCHED_OPERATORS}, not {operator!r} (use the streaming engine)")
     cfg = resolve_config(config)
-    graph = SceneGraph(vocabulary=vocabulary if (strict and vocabulary is not None) else None)
+    if graph is None:
+        graph = SceneGraph(vocabulary=vocabulary if (strict and vocabulary is not None) else None)
+    elif len(graph.nx) or len(graph.provenance) or graph.provenance.n_compacted or graph.clock != -1 or graph.meta:
+        raise ValueError("batched replay fills an empty graph (no nodes, beliefs, clock or meta yet)")
     if graph.vocabulary is not None:
         for pred in cols.predicates:
             if pred not in graph.vocabulary:
                 raise UnknownPredicateError(pred, graph.vocabulary)
+    t_ev = np.asarray(cols.event_t, dtype=np.int64)
+    if np.any(t_ev[1:] < t_ev[:-1]):
+        raise ValueError("batched replay needs non-decreasing event times t (use the streaming engine)")
     prov = graph.provenance
     a0, b0 = prov.prior_alpha, prov.prior_beta
     stats = {k: 0 for k in ("events", "targets", "committed", "refused", "quarantined", "released",
@@ -143,156 +428,151 @@ def batched_replay(
 
     # ---- entries above the targeting threshold, in stream order
     keep = cols.mass > cfg.tau_t
-    stats["below_tau_t"] = int((~keep).sum())
-    pair = cols.pair[keep]
-    ev = cols.event[keep]
-    mass = cols.mass[keep]
-    conf = cols.conf[keep]
-    t_entry = cols.event_t[ev]
+    stats["below_tau_t"] = int(len(keep) - np.count_nonzero(keep))
+    pair, ev = cols.pair[keep], cols.event[keep]
+    t_entry = t_ev[ev]
     n = len(pair)
+    n_pairs = len(cols.pairs)
     stats["committed"] = n
 
-    # ---- waves: rank of each entry within its pair (stable), then apply rank by rank
-    order = np.argsort(pair, kind="stable")
-    sorted_pairs = pair[order]
-    starts = np.flatnonzero(np.r_[True, sorted_pairs[1:] != sorted_pairs[:-1]])
-    counts = np.diff(np.r_[starts, n])
-    rank = np.empty(n, dtype=np.int64)
-    rank[order] = np.arange(n) - np.repeat(starts, counts)
-    wave_order = np.lexsort((np.arange(n), rank))  # by rank, stream order within a wave
-    wave_bounds = np.searchsorted(rank[wave_order], np.arange(int(rank.max()) + 2))
-    n_pairs = len(cols.pairs)
-    alpha = np.full(n_pairs, a0)
-    beta = np.full(n_pairs, b0)
-    da = np.empty(n)
-    db = np.empty(n)
-    for j in range(len(wave_bounds) - 1):
-        sel = wave_order[wave_bounds[j]:wave_bounds[j + 1]]
-        idx = pair[sel]
-        d_a, d_b = _increments(operator, cfg, mass[sel], conf[sel], alpha[idx], beta[idx], a0, b0)
-        da[sel] = d_a
-        db[sel] = d_b
-        alpha[idx] += d_a
-        beta[idx] += d_b
-    stance = np.where(da > db, 1, np.where(da < db, -1, 0))
-
-    # ---- time: clock, compaction schedule (a compaction runs when an event opens a new epoch)
-    t_ev = cols.event_t
-    t_prov = cfg.t_prov
-    epoch = t_ev // t_prov
+    # ---- time: clock and compaction schedule (a compaction runs when an event opens a new epoch)
+    epoch = t_ev // cfg.t_prov
     opens = np.flatnonzero(epoch > np.maximum.accumulate(np.r_[0, epoch[:-1]]))
-    horizons = t_ev[opens] - t_prov  # compaction k folds every settled entry with t < horizons[k]
-    graph.clock = int(t_ev[-1])
+    graph.clock = max(int(t_ev[-1]), -1)
     if len(opens):
         graph.meta["compaction_epoch"] = int(epoch[opens[-1]])
-    # entry e is recorded after the compactions of events <= its own event: it is folded by the
-    # first later compaction whose horizon exceeds its t
-    fold_k = np.full(n, -1, dtype=np.int64)
-    if len(opens):
-        first_after = np.searchsorted(opens, ev, side="right")  # compactions strictly after entry's event
-        # horizons are non-decreasing, so the first compaction >= first_after with horizon > t
-        hmax = np.maximum.accumulate(horizons)
-        cand = np.searchsorted(hmax, t_entry, side="right")
-        k = np.maximum(first_after, cand)
-        fold_k = np.where(k < len(opens), k, -1)
-    folded = fold_k >= 0
-    stats["compacted"] = int(folded.sum())
-    prov.n_compacted = stats["compacted"]
+    if n == 0:
+        return graph, stats
+    # entry e exists from its event on; compaction k folds it if k runs after that event and its
+    # horizon t(opens[k]) - T_prov exceeds e's t. Both bounds grow with the entry's position, so
+    # fold_k is non-decreasing and the folded entries are a prefix of the stream.
+    fold_k = np.maximum(np.searchsorted(opens, ev, side="right"),
+                        np.searchsorted(t_ev[opens] - cfg.t_prov, t_entry, side="right"))
+    n_fold = int(np.count_nonzero(fold_k < len(opens)))
+    stats["compacted"] = prov.n_compacted = n_fold
 
-    # ---- materialise: nodes and pairs in first-appearance order
-    pair_nodes = cols.pairs
-    used = np.zeros(n_pairs, dtype=bool)
-    used[pair] = True
-    first_pos = np.full(n_pairs, n, dtype=np.int64)
-    np.minimum.at(first_pos, pair, np.arange(n))
-    pair_seq = np.flatnonzero(used)[np.argsort(first_pos[used], kind="stable")]
-    gnx = graph.nx
-    for k_pair in pair_seq.tolist():
-        node = pair_nodes[k_pair][0]
-        if node not in gnx:
-            graph.add_node(node)
-    logs: list[_PairLog | None] = [None] * n_pairs
-    alpha_l, beta_l = alpha.tolist(), beta.tolist()
-    for k_pair in pair_seq.tolist():
-        log = _PairLog(alpha_l[k_pair], beta_l[k_pair])
-        prov._pairs[pair_nodes[k_pair]] = log
-        logs[k_pair] = log
+    # ---- beliefs: waves of distinct pairs
+    waves = _Waves(pair, n_pairs)
+    da, db, alpha, beta = _increments(operator, cfg, cols.mass[keep], cols.conf[keep], waves, a0, b0)
+    lap("apply")
+    buckets = _fold(waves, pair, n_pairs, fold_k, t_entry, da, db, n_fold) if n_fold else None
+    lap("fold")
 
-    # compacted buckets: staged fsum, one stage per compaction that folded entries of the pair
-    if folded.any():
-        fi = np.flatnonzero(folded)
-        grp = np.lexsort((fi, fold_k[fi], pair[fi]))
-        fi = fi[grp]
-        gp, gk = pair[fi], fold_k[fi]
-        brk = np.flatnonzero(np.r_[True, (gp[1:] != gp[:-1]) | (gk[1:] != gk[:-1]), True])
-        da_l, db_l, t_l = da[fi].tolist(), db[fi].tolist(), t_entry[fi].tolist()
-        gp_l = gp.tolist()
-        fsum = math.fsum
-        bucket: ProvenanceEntry | None = None
-        bucket_pair = -1
-        for s, e in zip(brk[:-1].tolist(), brk[1:].tolist()):
-            k_pair = gp_l[s]
-            sa, sb, tm = fsum(da_l[s:e]), fsum(db_l[s:e]), max(t_l[s:e])
-            if k_pair != bucket_pair:  # first compaction that folds this pair: a new bucket
-                node, pred = pair_nodes[k_pair]
-                bucket = ProvenanceEntry(None, tm, sa, sb, EntryStatus.COMPACTED, node, pred)
-                bucket.n_folded = e - s
-                logs[k_pair].entries.append(bucket)  # type: ignore[union-attr]
-                bucket_pair = k_pair
-            else:  # a later compaction: fold the stage into the bucket, as ProvenanceStore does
-                bucket.d_alpha = fsum((bucket.d_alpha, sa))  # type: ignore[union-attr]
-                bucket.d_beta = fsum((bucket.d_beta, sb))  # type: ignore[union-attr]
-                bucket.n_folded += e - s  # type: ignore[union-attr]
-                bucket.t = max(bucket.t, tm)  # type: ignore[union-attr]
-        # event ids whose every entry was folded are remembered (bounded, most recent kept)
-        live_ev = np.zeros(cols.n_events, dtype=bool)
-        live_ev[ev[~folded]] = True
-        gone = np.unique(ev[folded])
-        gone = gone[~live_ev[gone]]
-        for i in gone[-prov.remember_compacted:].tolist() if prov.remember_compacted > 0 else []:
-            prov._remember_compacted(cols.event_ids[i])
-
-    # live entries in arrival order: pair logs, event index, timeline
-    ids = cols.event_ids
-    by_event = prov._by_event
-    timeline = prov._timeline
-    committed = EntryStatus.COMMITTED
-    live = np.flatnonzero(~folded)
-    for i, k_pair, e_i, t_i, d_a, d_b, st in zip(
-        live.tolist(), pair[live].tolist(), ev[live].tolist(), t_entry[live].tolist(),
-        da[live].tolist(), db[live].tolist(), stance[live].tolist(),
-    ):
-        node, pred = pair_nodes[k_pair]
-        eid = ids[e_i]
-        entry = ProvenanceEntry(eid, t_i, d_a, d_b, committed, node, pred, st)
-        logs[k_pair].entries.append(entry)  # type: ignore[union-attr]
-        bucket_list = by_event.get(eid)
-        if bucket_list is None:
-            by_event[eid] = [entry]
-        else:
-            bucket_list.append(entry)
-        timeline.append(entry)
+    # ---- Python objects: nodes and logs in order of first appearance, buckets, live entries
+    keys = cols.pairs
+    assert waves.order is not None
+    seq = np.argsort(waves.order[waves.start])  # rows by their first entry
+    pair_seq = waves.rows[seq]
+    seq_keys = list(map(keys.__getitem__, pair_seq.tolist()))
+    new_nodes = list(dict.fromkeys(k[0] for k in seq_keys))
+    for node in new_nodes:
+        if isinstance(node, bool) or not isinstance(node, (str, int)):
+            raise TypeError(f"node ids must be str or int (JSON-serialisable), got {type(node).__name__}")
+    graph.nx.add_nodes_from(new_nodes)
+    logs = list(map(_PairLog, alpha[seq].tolist(), beta[seq].tolist()))
+    prov._pairs.update(zip(seq_keys, logs))
+    log_of: dict[int, _PairLog] = dict(zip(pair_seq.tolist(), logs))
+    if buckets is not None:
+        b_pair, b_t, b_alpha, b_beta, b_n = buckets
+        b_keys = list(map(keys.__getitem__, b_pair.tolist()))
+        entries = map(ProvenanceEntry, repeat(None), b_t.tolist(), b_alpha.tolist(), b_beta.tolist(),
+                      repeat(EntryStatus.COMPACTED), [k[0] for k in b_keys], [k[1] for k in b_keys])
+        for p, bucket, n_folded in zip(b_pair.tolist(), entries, b_n.tolist()):
+            bucket.n_folded = n_folded
+            log_of[p].entries.append(bucket)
+    # live entries (the last T_prov steps): logs, timeline, event index
+    live_ev = ev[n_fold:]
+    d_a, d_b = da[n_fold:], db[n_fold:]
+    stance = np.where(d_a > d_b, 1, np.where(d_a < d_b, -1, 0))
+    live_pair = pair[n_fold:].tolist()
+    live_keys = list(map(keys.__getitem__, live_pair))
+    live = list(map(ProvenanceEntry, list(map(cols.event_ids.__getitem__, live_ev.tolist())),
+                    t_entry[n_fold:].tolist(), d_a.tolist(), d_b.tolist(), repeat(EntryStatus.COMMITTED),
+                    [k[0] for k in live_keys], [k[1] for k in live_keys], stance.tolist()))
+    for p, entry in zip(live_pair, live):
+        log_of[p].entries.append(entry)
+    prov._timeline.extend(live)
+    idr = _IdRuns.build(cols, ev, fold_k, opens)
+    _index_live(prov, cols, idr, ev, n_fold, live)
+    lap("objects")
+    if n_fold:
+        _remember(prov, cols, idr, pair, ev, fold_k, n_fold)
+    lap("memory")
     return graph, stats
 
 
+def _fold(waves: _Waves, pair: np.ndarray, n_pairs: int, fold_k: np.ndarray, t_entry: np.ndarray,
+          da: np.ndarray, db: np.ndarray, n_fold: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The compacted bucket of every pair with folded entries, as ``ProvenanceStore.compact``
+    leaves it: (pair, t, d_alpha, d_beta, n_folded) arrays.
+
+    Each compaction adds the ``fsum`` of the pair's entries it folds to the bucket with another
+    ``fsum`` (a stage); both are reproduced here without Python objects.
+    """
+    assert waves.order is not None
+    folded = waves.order[waves.order < n_fold]  # row by row, (compaction, stream order) within
+    fp, fk = pair[folded], fold_k[folded]
+    g_start = np.flatnonzero(np.r_[True, (fp[1:] != fp[:-1]) | (fk[1:] != fk[:-1])])
+    g_size = np.diff(np.r_[g_start, len(folded)])
+    stages = _Waves(fp[g_start], n_pairs, contiguous=True)  # a pair's stages, compaction by compaction
+    b_alpha, b_beta = stages.running_sums(
+        (_stage_sums(da[folded], g_start, g_size), _stage_sums(db[folded], g_start, g_size)), (0.0, 0.0))
+    # per pair (``stages.rows`` order): entries folded, and the t of the last one (t never decreases)
+    p_first = _starts(fp)
+    p_last = np.r_[p_first[1:], len(folded)] - 1
+    at = np.empty(n_pairs, dtype=np.int64)
+    at[fp[p_first]] = np.arange(len(p_first))
+    rows = at[stages.rows]
+    return stages.rows, t_entry[folded[p_last]][rows], b_alpha, b_beta, (p_last - p_first + 1)[rows]
+
+
+class _Laps:
+    """CPU seconds (``time.process_time``) of consecutive named phases, into ``into`` unless None."""
+
+    def __init__(self, into: dict[str, float] | None) -> None:
+        self.into = into
+        self.last = time.process_time()
+
+    def __call__(self, name: str) -> None:
+        if self.into is not None:
+            now = time.process_time()
+            self.into[name] = now - self.last
+            self.last = now
+
+
+def _bits(x: Any) -> Any:
+    """Floats as their exact hex form (tells -0.0 from 0.0), containers recursively."""
+    if isinstance(x, float):
+        return x.hex()
+    if isinstance(x, (list, tuple)):
+        return [_bits(v) for v in x]
+    return x
+
+
 def provenance_signature(graph: SceneGraph) -> dict[str, Any]:
-    """Everything the equality tests compare: beliefs, logs, queues, event index, compaction."""
+    """Everything the equality tests compare, floats bit for bit and every order that is
+    observable: beliefs, logs, queues, event index, timeline, compacted-id memory."""
     prov = graph.provenance
+
+    def entry(e: ProvenanceEntry) -> Any:
+        return _bits([e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by,
+                      e.n_folded, e.node, e.predicate, e.alive])
+
     return {
-        "nodes": list(graph.nx.nodes),
+        "nodes": [(n, dict(a)) for n, a in graph.nx.nodes(data=True)],
         "clock": graph.clock,
         "meta": dict(graph.meta),
-        "pairs": [
-            (key, log.alpha, log.beta,
-             [(e.as_tuple(), e.stance, e.corroborated_by, e.n_folded, e.node, e.predicate) for e in log.entries])
-            for key, log in prov._pairs.items()
-        ],
-        "quarantine": [e.as_tuple() for e in prov.quarantine if e.alive and e.status is EntryStatus.QUARANTINED],
-        "disagreement": [e.as_tuple() for e in prov.disagreement if e.alive and e.status is EntryStatus.REFUSED],
-        "by_event": {k: [e.as_tuple() for e in v] for k, v in prov._by_event.items()},
-        "timeline": [e.as_tuple() for e in prov._timeline if e.alive],
-        "compacted_ids": set(prov._compacted_order),
+        "pairs": [(key, _bits(log.alpha), _bits(log.beta), [entry(e) for e in log.entries])
+                  for key, log in prov._pairs.items()],
+        "quarantine": [entry(e) for e in prov.quarantine],
+        "disagreement": [entry(e) for e in prov.disagreement],
+        "pending_by_pair": {k: [entry(e) for e in v] for k, v in prov._pending_by_pair.items()},
+        "by_event": [(k, [entry(e) for e in v]) for k, v in prov._by_event.items()],
+        "timeline": [entry(e) for e in prov._timeline],
+        "compacted_order": list(prov._compacted_order),
+        "compacted_ids": set(prov._compacted_ids),
         "n_compacted": prov.n_compacted,
+        "prior": (prov.prior_alpha, prov.prior_beta, prov.remember_compacted),
     }
 
 
