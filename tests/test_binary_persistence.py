@@ -4,6 +4,7 @@ support, and a FormatError naming the array / field for every kind of bad file."
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import math
 import pathlib
@@ -98,7 +99,10 @@ def saved(tmp_path: Path) -> tuple[SceneGraph, Path]:
 def test_round_trip_is_lossless_and_matches_json(tmp_path: Path, saved: tuple[SceneGraph, Path]) -> None:
     g, path = saved
     assert path.name == "g.npz" and path.read_bytes()[:4] == b"PK\x03\x04"
+    thresholds, enabled = gc.get_threshold(), gc.isenabled()
     h = SceneGraph.load(path)
+    g.save(path)
+    assert gc.get_threshold() == thresholds and gc.isenabled() == enabled  # collector settings restored
     assert _signature(h) == _signature(g)
     assert h.clock == g.clock and h.meta == g.meta and h.nx.graph == g.nx.graph
     assert h.relations() == g.relations()
@@ -291,6 +295,10 @@ def test_cli_inspect_query_and_replay_accept_npz(tmp_path: Path, saved: tuple[Sc
     assert (tmp_path / "graphs" / "comod" / "graph.npz").exists()
     assert SceneGraph.load(tmp_path / "graphs" / "majority").probability("s/car", "is_car") > 0.5
     assert main(["inspect", str(tmp_path / "graphs" / "comod")]) == 0
+    capsys.readouterr()
+    rc = main(["replay", str(events), str(events), "--truth", str(tmp_path / "truth.json"), "--vocab", "kitti360",
+               "--operators", "majority", "--save-graph", str(tmp_path / "g2"), "--graph-format", "npz"])
+    assert rc == 1 and "--graph-format npz is not supported with several scenes" in capsys.readouterr().err
     (tmp_path / "bad.npz").write_bytes(b"PK\x03\x04 not really")
     assert main(["inspect", str(tmp_path / "bad.npz")]) == 1
     assert "not an .npz archive" in capsys.readouterr().err
@@ -342,7 +350,10 @@ def _header_change(**fields: Any):
     (lambda a: a.update(pair_alpha=a["pair_alpha"] + np.eye(1, len(a["pair_alpha"]), 4)[0]),
      r"pair 4 .*stored alpha=.* does not equal prior \+ sum of logged increments"),
     (_set("entry_n_folded", 0, 0), "array 'entry_n_folded'"),
-    (_set("pair_length", 0, 10**6), "array 'pair_length': lengths add up to"),
+    (_set("pair_length", 0, 10**6), r"array 'pair_length': lengths must be in \[0, \d+\]"),
+    (_set("pair_length", 0, 0), "array 'pair_length': lengths add up to"),
+    (lambda a: a.update(header=np.frombuffer(b"[" * 100000 + b"]" * 100000, np.uint8)),
+     "array 'header': not a JSON text"),
     (lambda a: a.update({"entry_event.text": np.frombuffer(a["entry_event.text"].tobytes() + b"\x00x", np.uint8)}),
      r"array 'entry_event.text': expected \d+ NUL-separated strings, found \d+"),
     (lambda a: a.update({"node_id.text": a["node_id.text"][:-2]}), "array 'node_id' row 6: bad JSON value"),

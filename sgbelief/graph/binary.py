@@ -2,8 +2,8 @@
 
 The JSON format (:mod:`sgbelief.graph.persistence`) holds the same information, but writing and
 parsing ~200 bytes of JSON per node and per log entry is slow for 10⁶-node maps. Here every
-per-node, per-pair and per-entry field is one numpy array (strings are one UTF-8 blob plus
-lengths), and everything irregular (vocabulary, meta, attribute-column types) sits in a small
+per-node, per-pair and per-entry field is one numpy array (a string column is one NUL-separated
+UTF-8 blob), and everything irregular (vocabulary, meta, attribute-column types) sits in a small
 JSON ``header``. The layout is documented in ``docs/formats.md``.
 
 Loading never unpickles (``np.load(..., allow_pickle=False)``) and checks, before any array's
@@ -63,7 +63,6 @@ _B1 = np.dtype("|b1")
 #: node attributes the JSON loader turns into tuples of float (see ``restore_node_attr``)
 _SPECIAL_DEPTH = {"centroid": 1, "bbox": 2}
 _FLOAT_TYPES = frozenset({float, np.float64})
-_NUMBER_TYPES = frozenset({float, np.float64, int, bool})
 _SEP = "\x00"
 
 __all__ = ["FORMAT", "VERSION", "save_graph_npz", "load_graph_npz", "graph_to_arrays"]
@@ -205,8 +204,9 @@ def _decode_values(arch: _Archive, name: str, spec: dict[str, Any], rows: int, s
             for i, text in enumerate(values):
                 try:
                     out.append(json.loads(text, parse_constant=_json_constant))
-                except ValueError as exc:
-                    raise arch.error(f"array '{name}' row {i}: bad JSON value ({exc})") from None
+                except (ValueError, RecursionError) as exc:
+                    raise arch.error(f"array '{name}' row {i}: bad JSON value ({type(exc).__name__}: {exc})"
+                                     ) from None
             values = out
     elif kind == "float":
         arr = arch.read(name, *_value_array(spec, rows))
@@ -314,11 +314,8 @@ def _make_dicts(keys: list[str], cols: list[list[Any]], count: int) -> list[dict
     return [dict(zip(keys, row)) for row in zip(*cols)]
 
 
-def _decode_records(arch: _Archive, prefix: str, spec: _Records, n: int, special: bool,
-                    untrack: bool = False) -> list[dict[str, Any]]:
-    """The attribute dicts. ``untrack``: run one young-generation collection before making the
-    dicts, so tuples of floats (``bbox``, ``centroid``) are untracked and the dicts holding them are
-    created untracked: millions fewer objects for every later collection to traverse."""
+def _decode_records(arch: _Archive, prefix: str, spec: _Records, n: int, special: bool) -> list[dict[str, Any]]:
+    """The attribute dicts, in row order."""
     codes = arch.read(f"{prefix}_pattern", _I4, (n,))
     n_pat, n_keys = len(spec.patterns), len(spec.columns)
     if n and (int(codes.min()) < 0 or int(codes.max()) >= n_pat):
@@ -336,8 +333,6 @@ def _decode_records(arch: _Archive, prefix: str, spec: _Records, n: int, special
         rows = int(per_pattern[holders[j]].sum())
         sp = col.key if special and col.key in _SPECIAL_DEPTH else None
         values.append(_decode_values(arch, f"{prefix}_attr.{j}", col.model_dump(), rows, sp))
-    if untrack:
-        gc.collect(0)
     used = [p for p in range(n_pat) if per_pattern[p]]
     if len(used) == 1:
         pat = spec.patterns[used[0]]
@@ -362,18 +357,20 @@ def _decode_records(arch: _Archive, prefix: str, spec: _Records, n: int, special
 
 # ======================================================================== header
 class _Column(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
     kind: str = Field(pattern="^(str|int|float|bool|json)$")
     shape: list[int] = []
     key: str | None = None
 
 
 class _Records(BaseModel):
+    model_config = ConfigDict(strict=True)
     columns: list[_Column]
     patterns: list[list[int]]
 
 
 class _Counts(BaseModel):
+    model_config = ConfigDict(strict=True)
     nodes: int = Field(ge=0)
     edges: int = Field(ge=0)
     pairs: int = Field(ge=0)
@@ -436,23 +433,15 @@ class _NodeIndex:
 
 
 def _distinct_codes(values: list[Any] | tuple[Any, ...]) -> tuple[np.ndarray, list[Any]]:
-    """(code of each value, distinct values in first-appearance order). Predicates are usually a
-    handful of shared string objects: then codes come from an address map without hashing."""
-    ids = set(map(id, values))
-    if len(ids) <= 4096:
-        firsts: dict[int, Any] = {}
-        for v in values:
-            if id(v) not in firsts:
-                firsts[id(v)] = v
-                if len(firsts) == len(ids):
-                    break
-        distinct = list(dict.fromkeys(firsts.values()))
-        code_of = {v: i for i, v in enumerate(distinct)}
-        by_id = {i: code_of[v] for i, v in firsts.items()}
-        return np.fromiter(map(by_id.__getitem__, map(id, values)), _I8, len(values)), distinct
-    distinct = list(dict.fromkeys(values))
+    """(code of each value, distinct values in first-appearance order). Values are grouped by
+    address first (predicates are usually a handful of shared string objects), then by equality."""
+    ids = np.fromiter(map(id, values), np.uint64, len(values))
+    _uid, first, inverse = np.unique(ids, return_index=True, return_inverse=True)
+    objs = [values[i] for i in first.tolist()]
+    distinct = list(dict.fromkeys(values[i] for i in np.sort(first).tolist()))
     code_of = {v: i for i, v in enumerate(distinct)}
-    return np.fromiter(map(code_of.__getitem__, values), _I8, len(values)), distinct
+    obj_code = np.fromiter(map(code_of.__getitem__, objs), _I8, len(objs))
+    return obj_code[inverse.reshape(-1)], distinct
 
 
 def _positions(objs: Iterable[Any], sorted_ids: np.ndarray, order: np.ndarray) -> np.ndarray:
@@ -501,7 +490,7 @@ def graph_to_arrays(graph: SceneGraph) -> dict[str, np.ndarray]:
     keys = list(prov._pairs)
     logs = list(prov._pairs.values())
     n_pairs = len(keys)
-    pair_nodes, pair_preds = tuple(zip(*keys)) if keys else ((), ())
+    pair_nodes, pair_preds = tuple(map(itemgetter(0), keys)), tuple(map(itemgetter(1), keys))
     pair_node = index.rows(pair_nodes)
     if n_pairs and pair_node.min() < 0:
         bad = pair_nodes[int(np.flatnonzero(pair_node < 0)[0])]
@@ -684,25 +673,37 @@ class _Archive:
 
 
 @contextmanager
-def _gc_paused() -> Iterator[bool]:
-    """Bulk construction makes millions of objects without cycles: pause the cyclic GC meanwhile
-    (otherwise every few thousand allocations it re-traverses the growing heap). Yields whether
-    the collector was enabled."""
+def _gc_paused() -> Iterator[None]:
+    """Saving allocates millions of temporaries: pause the cyclic GC meanwhile."""
     was = gc.isenabled()
     gc.disable()
     try:
-        yield was
+        yield
     finally:
         if was:
             gc.enable()
+
+
+@contextmanager
+def _young_collections_only() -> Iterator[None]:
+    """Loading makes millions of long-lived objects. Young collections stay on (they are cheap
+    while the new objects are still in cache, and they untrack the float tuples early, so the
+    attribute dicts holding them are created untracked); full collections, which would re-traverse
+    the whole growing heap again and again, are postponed until the graph is built."""
+    t0, t1, t2 = gc.get_threshold()
+    gc.set_threshold(t0, t1, 2**30)
+    try:
+        yield
+    finally:
+        gc.set_threshold(t0, t1, t2)
 
 
 def _read_header(arch: _Archive) -> _Header:
     raw = arch.read("header", _U1, (None,))
     try:
         doc = json.loads(raw.tobytes().decode("utf-8"), parse_constant=_json_constant)
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise arch.error(f"array 'header': not a JSON text ({exc})") from None
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise arch.error(f"array 'header': not a JSON text ({type(exc).__name__}: {exc})") from None
     if not isinstance(doc, dict):
         raise arch.error("array 'header': must hold a JSON object")
     if doc.get("format") != FORMAT:
@@ -760,23 +761,19 @@ def load_graph_npz(path: str | Path) -> SceneGraph:
         raise FormatError(f"not an .npz archive (truncated or another format): {exc}", path=path) from None
     if not isinstance(npz, np.lib.npyio.NpzFile):
         raise FormatError("a single .npy array, not an .npz scene graph archive", path=path)
-    with npz:
-        with _gc_paused() as gc_enabled:
-            graph = _load(_Archive(npz, path), gc_enabled)
-        if gc_enabled:  # the young collection the new objects are due for, paid here rather than later
-            gc.collect(0)
-    return graph
+    with npz, _young_collections_only():
+        return _load(_Archive(npz, path))
 
 
-def _load(arch: _Archive, gc_enabled: bool) -> SceneGraph:
+def _load(arch: _Archive) -> SceneGraph:
     h = _read_header(arch)
     c = h.counts
     n, n_pairs, m = c.nodes, c.pairs, c.entries
     statuses = [EntryStatus(s) for s in h.statuses]
     # ------------------------------------------------ read and validate every array first
-    node_ids = _decode_values(arch, "node_id", h.node_ids.model_dump(), n)
     if h.node_ids.kind not in ("str", "int", "json"):
         raise arch.error("header field 'node_ids.kind': node ids must be stored as str, int or json")
+    node_ids = _decode_values(arch, "node_id", h.node_ids.model_dump(), n)
     for i, v in enumerate(node_ids if h.node_ids.kind == "json" else ()):
         if isinstance(v, bool) or not isinstance(v, (str, int)):
             raise arch.error(f"array 'node_id' row {i}: node ids must be strings or integers, got {v!r}")
@@ -799,8 +796,8 @@ def _load(arch: _Archive, gc_enabled: bool) -> SceneGraph:
         if bad.any():
             raise arch.error(f"array '{name}': row {int(np.flatnonzero(bad)[0])} is not a finite number > 0")
     lengths = arch.read("pair_length", _I8, (n_pairs,))
-    if n_pairs and int(lengths.min()) < 0:
-        raise arch.error("array 'pair_length': negative length")
+    if n_pairs and (int(lengths.min()) < 0 or int(lengths.max()) > m):
+        raise arch.error(f"array 'pair_length': lengths must be in [0, {m}]")
     if int(lengths.sum()) != m:
         raise arch.error(f"array 'pair_length': lengths add up to {int(lengths.sum())}, header counts {m} entries")
     t = arch.read("entry_t", _I8, (m,))
@@ -824,7 +821,8 @@ def _load(arch: _Archive, gc_enabled: bool) -> SceneGraph:
     if len(corr_entry) > 1 and not (np.diff(corr_entry) > 0).all():
         raise arch.error("array 'corroborated_entry': entry indices must be strictly increasing")
     corr_len = arch.read("corroborated_length", _I8, (c.corroborated,))
-    if c.corroborated and int(corr_len.min()) < 0 or int(corr_len.sum()) != c.corroborating_ids:
+    if c.corroborated and (int(corr_len.min()) < 0 or int(corr_len.max()) > c.corroborating_ids) \
+            or int(corr_len.sum()) != c.corroborating_ids:
         raise arch.error("array 'corroborated_length': lengths must be >= 0 and add up to counts.corroborating_ids")
     corr_ids = _decode_values(arch, "corroborated_by", {"kind": "str"}, c.corroborating_ids)
     timeline = arch.read("timeline", _I8, (c.timeline,))
@@ -852,7 +850,7 @@ def _load(arch: _Archive, gc_enabled: bool) -> SceneGraph:
             key = (node_ids[int(pair_node[i])], h.predicates[int(pair_pred[i])])
             raise arch.error(f"pair {i} {key!r}: stored {name}={float(stored[i])!r} does not equal prior + sum of "
                              f"logged increments ({float(ref[i])!r}); the file was edited or corrupted")
-    # pair keys (node, predicate) before the node dicts, so that one young collection untracks both
+    # pair keys (node, predicate) before the node dicts: young collections untrack the tuples early
     node_arr = np.empty(n, dtype=object)
     node_arr[:] = node_ids
     pred_arr = np.empty(len(h.predicates), dtype=object)
@@ -860,7 +858,7 @@ def _load(arch: _Archive, gc_enabled: bool) -> SceneGraph:
     pair_nodes = node_arr[pair_node]
     pair_preds = pred_arr[pair_pred]
     pair_keys = list(zip(pair_nodes.tolist(), pair_preds.tolist()))
-    node_attrs = _decode_records(arch, "node", h.node_attrs, n, True, untrack=gc_enabled)
+    node_attrs = _decode_records(arch, "node", h.node_attrs, n, True)
     edge_attrs = _decode_records(arch, "edge", h.edge_attrs, c.edges, False)
     arch.check_unused()
     arch.check_unused()
