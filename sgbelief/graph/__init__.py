@@ -1,4 +1,5 @@
-"""Beliefs, provenance, the scene graph and its persistence (JSON, and the binary .npz layout of :mod:`sgbelief.graph.binary`)."""
+"""Beliefs, provenance, the scene graph and its persistence (JSON, or the binary ``.npz`` layout of
+:mod:`sgbelief.graph.binary`)."""
 
 from __future__ import annotations
 

@@ -557,7 +557,8 @@ def graph_to_arrays(graph: SceneGraph) -> dict[str, np.ndarray]:
     d = _positions(prov.disagreement, sorted_ids, order)
     arrays["disagreement"] = d[status[d] == statuses.index(EntryStatus.REFUSED)]
     compacted = list(prov._compacted_order)
-    arrays.update({f"compacted_ids{s}": a for s, a in _encode_strings(compacted, lambda i: "compacted event id").items()})
+    arrays.update({f"compacted_ids{s}": a
+                   for s, a in _encode_strings(compacted, lambda i: "compacted event id").items()})
     header = {
         "format": FORMAT,
         "version": VERSION,
@@ -902,7 +903,8 @@ def _add_nodes(g: nx.MultiDiGraph, ids: list[Any], attrs: list[dict[str, Any]]) 
 
 
 def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[Any, str]],
-                 pair_nodes: np.ndarray, pair_preds: np.ndarray, alpha: np.ndarray, beta: np.ndarray, lengths: np.ndarray,
+                 pair_nodes: np.ndarray, pair_preds: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+                 lengths: np.ndarray,
                  offsets: np.ndarray, t: np.ndarray, da: np.ndarray, db: np.ndarray, status: np.ndarray,
                  stance: np.ndarray, n_folded: np.ndarray, null: np.ndarray, eids: list[Any],
                  corr_entry: np.ndarray, corr_len: np.ndarray, corr_ids: list[str], timeline: np.ndarray,
