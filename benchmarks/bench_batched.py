@@ -2,10 +2,12 @@
 
 Per operator: columnarise (once per stream), batched apply (schedule + belief waves) and store
 rebuild (compacted buckets in numpy, Python objects, compacted-id memory), each the best CPU
-time (``time.process_time``) of ``--repeat`` runs; the streaming engine (``replay``) on the same stream (or its first ``--stream-events``
-events), timed once; the speed-up; and whether both engines produced identical stores.
+time (``time.process_time``) of ``--repeat`` runs; the streaming engine (``replay``) on the same
+stream (or its first ``--stream-events`` events), timed once; the speed-ups; and whether both
+engines produced identical stores (``ProvenanceStore.to_dict``) on the streamed events.
 
-Usage: .venv/bin/python benchmarks/bench_batched.py [--events 300000] [--stream-events N] [--repeat 5] [--json]
+Usage: .venv/bin/python benchmarks/bench_batched.py [--events 300000] [--stream-events N] [--repeat 5]
+       [--nodes 10000] [--json]
 """
 
 from __future__ import annotations
@@ -15,11 +17,15 @@ import gc
 import json
 import statistics
 import time
+from collections.abc import Callable
+from typing import TypeVar
 
 import _common  # noqa: F401
 
+T = TypeVar("T")
 
-def _cpu(fn):  # type: ignore[no-untyped-def]
+
+def _cpu(fn: Callable[[], T]) -> tuple[T, float]:
     """(result, CPU seconds) of fn(), after collecting earlier garbage outside the timing."""
     gc.collect()
     t0 = time.process_time()
@@ -54,17 +60,15 @@ def main() -> int:
         total = []
         for _ in range(args.repeat):
             laps: dict[str, float] = {}
-            graph, s = _cpu(lambda: batched_replay(cols, name, timings=laps))
+            _, s = _cpu(lambda: batched_replay(cols, name, timings=laps))
             for k, v in laps.items():
                 phases.setdefault(k, []).append(v)
             phases.setdefault("rebuild", []).append(laps["fold"] + laps["objects"] + laps["memory"])
             total.append(s)
-            del graph
-        run = make_runs([name], None)[0]
-        _, stream_s = _cpu(lambda: replay(sub, [run]))
-        same_graph = batched_replay(sub_cols, name)[0]
-        identical = same_graph.provenance.to_dict() == run.graph.provenance.to_dict()
-        del same_graph, run
+        streamed = make_runs([name], None)[0]
+        _, stream_s = _cpu(lambda: replay(sub, [streamed]))
+        batched_graph, _ = batched_replay(sub_cols, name)
+        identical = batched_graph.provenance.to_dict() == streamed.graph.provenance.to_dict()
         b = min(total)
         stream_rate = n_stream / stream_s
         out[name] = {

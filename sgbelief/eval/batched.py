@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from itertools import chain, repeat
@@ -230,6 +231,48 @@ def _stage_sums(values: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -> np
     return out
 
 
+_Buckets = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _fold(waves: _Waves, pair: np.ndarray, n_pairs: int, fold_k: np.ndarray, t_entry: np.ndarray,
+          da: np.ndarray, db: np.ndarray, n_fold: int) -> _Buckets:
+    """The compacted bucket of every pair with folded entries, as ``ProvenanceStore.compact``
+    leaves it: (pair, t, d_alpha, d_beta, n_folded) arrays.
+
+    Each compaction adds the ``fsum`` of the pair's entries it folds to the bucket with another
+    ``fsum`` (a stage); both are reproduced here without Python objects.
+    """
+    assert waves.order is not None
+    folded = waves.order[waves.order < n_fold]  # row by row, (compaction, stream order) within
+    fp, fk = pair[folded], fold_k[folded]
+    g_start = np.flatnonzero(np.r_[True, (fp[1:] != fp[:-1]) | (fk[1:] != fk[:-1])])
+    g_size = np.diff(np.r_[g_start, len(folded)])
+    stages = _Waves(fp[g_start], n_pairs, contiguous=True)  # a pair's stages, compaction by compaction
+    b_alpha, b_beta = stages.running_sums(
+        (_stage_sums(da[folded], g_start, g_size), _stage_sums(db[folded], g_start, g_size)), (0.0, 0.0))
+    # per pair (``stages.rows`` order): entries folded, and the t of the last one (t never decreases)
+    p_first = _starts(fp)
+    p_last = np.r_[p_first[1:], len(folded)] - 1
+    at = np.empty(n_pairs, dtype=np.int64)
+    at[fp[p_first]] = np.arange(len(p_first))
+    rows = at[stages.rows]
+    return stages.rows, t_entry[folded[p_last]][rows], b_alpha, b_beta, (p_last - p_first + 1)[rows]
+
+
+class _Laps:
+    """CPU seconds (``time.process_time``) of consecutive named phases, into ``into`` unless None."""
+
+    def __init__(self, into: dict[str, float] | None) -> None:
+        self.into = into
+        self.last = time.process_time()
+
+    def __call__(self, name: str) -> None:
+        if self.into is not None:
+            now = time.process_time()
+            self.into[name] = now - self.last
+            self.last = now
+
+
 # ------------------------------------------------------------------ event-id bookkeeping
 @dataclass
 class _IdRuns:
@@ -272,11 +315,10 @@ class _IdRuns:
 
 def _visit_positions(pairs: list[tuple[Any, str]], block_pairs: np.ndarray, block_ends: list[int]) -> np.ndarray:
     """Per block of distinct pair ids (in first-appearance order), each pair's position when a
-    ``set`` of their keys built by adding them in that order is iterated: the order in which
+    set that got their keys added one by one in that order is iterated: the order in which
     :meth:`ProvenanceStore.compact` visits its dirty pairs (a set's iteration order depends only
-    on the hashes and on the order in which they were added)."""
+    on the hashes and on the order in which they were added; re-adding a key changes nothing)."""
     pid = block_pairs.tolist()
-    keys = list(map(pairs.__getitem__, pid))
     seen = np.zeros(len(pairs), dtype=bool)
     seen[block_pairs] = True
     distinct = np.flatnonzero(seen).tolist()
@@ -284,7 +326,9 @@ def _visit_positions(pairs: list[tuple[Any, str]], block_pairs: np.ndarray, bloc
     visited: list[int] = []
     begin = 0
     for end in block_ends:
-        visited.extend(map(pair_of.__getitem__, set(keys[begin:end])))
+        dirty: set[tuple[Any, str]] = set()
+        deque(map(dirty.add, map(pairs.__getitem__, pid[begin:end])), maxlen=0)  # dirty.add(key), key by key
+        visited.extend(map(pair_of.__getitem__, dirty))
         begin = end
     order = np.array(visited, dtype=np.int64)
     slot = np.empty(len(pairs), dtype=np.int64)
@@ -499,45 +543,6 @@ def batched_replay(
         _remember(prov, cols, idr, pair, ev, fold_k, n_fold)
     lap("memory")
     return graph, stats
-
-
-def _fold(waves: _Waves, pair: np.ndarray, n_pairs: int, fold_k: np.ndarray, t_entry: np.ndarray,
-          da: np.ndarray, db: np.ndarray, n_fold: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The compacted bucket of every pair with folded entries, as ``ProvenanceStore.compact``
-    leaves it: (pair, t, d_alpha, d_beta, n_folded) arrays.
-
-    Each compaction adds the ``fsum`` of the pair's entries it folds to the bucket with another
-    ``fsum`` (a stage); both are reproduced here without Python objects.
-    """
-    assert waves.order is not None
-    folded = waves.order[waves.order < n_fold]  # row by row, (compaction, stream order) within
-    fp, fk = pair[folded], fold_k[folded]
-    g_start = np.flatnonzero(np.r_[True, (fp[1:] != fp[:-1]) | (fk[1:] != fk[:-1])])
-    g_size = np.diff(np.r_[g_start, len(folded)])
-    stages = _Waves(fp[g_start], n_pairs, contiguous=True)  # a pair's stages, compaction by compaction
-    b_alpha, b_beta = stages.running_sums(
-        (_stage_sums(da[folded], g_start, g_size), _stage_sums(db[folded], g_start, g_size)), (0.0, 0.0))
-    # per pair (``stages.rows`` order): entries folded, and the t of the last one (t never decreases)
-    p_first = _starts(fp)
-    p_last = np.r_[p_first[1:], len(folded)] - 1
-    at = np.empty(n_pairs, dtype=np.int64)
-    at[fp[p_first]] = np.arange(len(p_first))
-    rows = at[stages.rows]
-    return stages.rows, t_entry[folded[p_last]][rows], b_alpha, b_beta, (p_last - p_first + 1)[rows]
-
-
-class _Laps:
-    """CPU seconds (``time.process_time``) of consecutive named phases, into ``into`` unless None."""
-
-    def __init__(self, into: dict[str, float] | None) -> None:
-        self.into = into
-        self.last = time.process_time()
-
-    def __call__(self, name: str) -> None:
-        if self.into is not None:
-            now = time.process_time()
-            self.into[name] = now - self.last
-            self.last = now
 
 
 def _bits(x: Any) -> Any:
