@@ -304,6 +304,15 @@ def test_cli_inspect_query_and_replay_accept_npz(tmp_path: Path, saved: tuple[Sc
     assert "not an .npz archive" in capsys.readouterr().err
 
 
+def test_cli_import_cg_writes_npz(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_map = pytest.importorskip("test_conceptgraphs_import").write_map  # the fake ConceptGraphs map
+    src = write_map(tmp_path / "full_pcd_test.pkl.gz")
+    out = tmp_path / "o"
+    assert main(["import-cg", str(src), "--operator", "majority", "--out", str(out), "--graph-format", "npz"]) == 0
+    assert "graph.npz" in capsys.readouterr().out and not (out / "graph.json").exists()
+    assert SceneGraph.load(out).evidence_count() == 7
+
+
 # ---------------------------------------------------------------- bad files
 def _tampered(tmp_path: Path, path: Path, change: Any, *, pickle: bool = False) -> Path:
     arrays = _arrays(path)
