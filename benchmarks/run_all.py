@@ -22,7 +22,7 @@ FULL = {
     "history": ["bench_history.py", "--events", "1010000"],
     "memory_comod": ["bench_memory.py", "--events", "10000000", "--operator", "comod"],
     "memory_majority": ["bench_memory.py", "--events", "3000000", "--operator", "majority"],
-    "large_map": ["bench_large_map.py", "--nodes", "100000"],
+    "large_map": ["bench_large_map.py", "--nodes", "1000000"],
     "conceptgraphs": ["bench_conceptgraphs.py", "--frames", "3"],
     "batched": ["bench_batched.py", "--events", "300000", "--stream-events", "50000"],
     "parallel": ["bench_parallel.py", "--scenes", "8", "--workers", "2"],
