@@ -66,3 +66,21 @@ def test_unknown_predicate_is_reported_with_its_line(tmp_path: Path, capsys: pyt
     assert main(["replay", str(ev), "--truth", str(truth), "--vocab", "kitti360", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert ":6" in err and "is_carr" in err and "is_car" in err
+
+
+def test_several_scenes_with_workers_save_binary_graphs(tmp_path: Path) -> None:
+    scenes = []
+    for name in ("scene_a", "scene_b"):
+        d = tmp_path / name
+        d.mkdir()
+        scenes.append(_write_stream(d))
+    truth = tmp_path / "truth.json"
+    truth.write_text(scenes[0][1].read_text())
+    rc = main(["replay", str(scenes[0][0]), str(scenes[1][0]), "--truth", str(truth), "--vocab", "kitti360",
+               "--operators", "majority,comod", "--workers", "2", "--save-graph", str(tmp_path / "g"),
+               "--graph-format", "npz", "--no-progress"])
+    assert rc == 0
+    for name in ("scene_a", "scene_b"):
+        g = SceneGraph.load(tmp_path / "g" / "comod" / name)
+        assert (tmp_path / "g" / "comod" / name / "graph.npz").exists()
+        assert g.probability("s/car", "is_pedestrian") == 0.5

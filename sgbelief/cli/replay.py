@@ -47,9 +47,6 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--operators: give at least one operator name")
     truth = read_truth(args.truth)
     if len(args.events) > 1 or args.workers > 1 or args.executor != "local":
-        if args.save_graph and args.graph_format != "json":
-            raise ConfigError("--graph-format npz is not supported with several scenes / workers yet "
-                              "(the scene jobs save JSON); use one scene or --graph-format json")
         return _run_scenes(args, names, truth, vocab, config)
     runs = make_runs(names, vocab, config, strict=not args.allow_unknown_predicates)
     args.events = args.events[0]
@@ -93,7 +90,8 @@ def _run_scenes(args: argparse.Namespace, names: list[str], truth, vocab, config
     from sgbelief.graph.persistence import atomic_write_text
 
     jobs = [SceneJob(str(e), tuple(names), str(args.vocab), config.model_dump(), not args.allow_unknown_predicates,
-                     args.skip_bad_lines, str(args.save_graph) if args.save_graph else None) for e in args.events]
+                     args.skip_bad_lines, str(args.save_graph) if args.save_graph else None, args.graph_format)
+            for e in args.events]
     results = run_scenes(replay_scene, jobs, workers=args.workers, executor=args.executor)
     preds = _predicates(vocab, truth)
     scores = pool_scene_scores(results, truth, preds, tau=args.tau)

@@ -204,6 +204,7 @@ class SceneJob:
     strict: bool = True
     skip_bad_lines: bool = False
     save_graph: str | None = None
+    graph_format: str = "json"
 
 
 @dataclass
@@ -236,7 +237,7 @@ def replay_scene(job: SceneJob) -> SceneResult:
         probs[r.name] = d
         pairs[r.name] = list(prov.pairs())
         if job.save_graph:
-            r.graph.save(Path(job.save_graph) / r.name / Path(job.events).parent.name)
+            r.graph.save(Path(job.save_graph) / r.name / Path(job.events).parent.name, format=job.graph_format)
     return SceneResult(
         job.events, stats.events, stats.skipped, probs, pairs,
         {r.name: dict(getattr(r.operator, "stats", {})) for r in runs}, {r.name: r.seconds for r in runs},
