@@ -137,6 +137,10 @@ def test_batched_rejects_calibrated_operators_and_decreasing_time() -> None:
     recs[10] = recs[10]._replace(t=recs[9].t - 1) if recs[9].t > 0 else recs[10]._replace(t=-1)
     with pytest.raises(ValueError, match="non-decreasing"):
         batched_replay(EventColumns.from_records(recs), "majority")
+    cols = EventColumns.from_records(random_records(0, 20))
+    cols.event = cols.event[::-1].copy()
+    with pytest.raises(ValueError, match="stream order"):
+        batched_replay(cols, "majority")
     graph = SceneGraph()
     graph.add_node("x")
     with pytest.raises(ValueError, match="empty graph"):

@@ -461,6 +461,8 @@ def batched_replay(
     t_ev = np.asarray(cols.event_t, dtype=np.int64)
     if np.any(t_ev[1:] < t_ev[:-1]):
         raise ValueError("batched replay needs non-decreasing event times t (use the streaming engine)")
+    if np.any(cols.event[1:] < cols.event[:-1]):
+        raise ValueError("EventColumns entries must be in stream order (event indices non-decreasing)")
     prov = graph.provenance
     a0, b0 = prov.prior_alpha, prov.prior_beta
     stats = {k: 0 for k in ("events", "targets", "committed", "refused", "quarantined", "released",
