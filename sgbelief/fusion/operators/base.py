@@ -74,6 +74,22 @@ class BaseOperator:
     def _timeouts(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
         return []
 
+    def _add_counts(
+        self, n_targets: int, n_below: int, n_committed: int, n_quarantined: int = 0, n_refused: int = 0
+    ) -> None:
+        """Count one event and what happened to its targets."""
+        stats = self.stats
+        stats["events"] += 1
+        stats["targets"] += n_targets
+        if n_below:
+            stats["below_tau_t"] += n_below
+        if n_committed:
+            stats["committed"] += n_committed
+        if n_quarantined:
+            stats["quarantined"] += n_quarantined
+        if n_refused:
+            stats["refused"] += n_refused
+
     def _count(self, resolutions: list[QueueResolution]) -> None:
         stats = self.stats
         for r in resolutions:
@@ -129,13 +145,7 @@ class BaseOperator:
                     da, db = inc
                     record(node, pred, eid, t, da, db, _COMMITTED, 1 if da > db else -1 if da < db else 0)
                     n_committed += 1
-            stats = self.stats
-            stats["events"] += 1
-            stats["targets"] += n_targets
-            if n_below:
-                stats["below_tau_t"] += n_below
-            if n_committed:
-                stats["committed"] += n_committed
+            self._add_counts(n_targets, n_below, n_committed)
             return UpdateReport(eid, t, pred, (), tuple(resolutions))
         label_of = channel.label if channel is not None else None
         verdict_of = self._verdict
@@ -171,13 +181,7 @@ class BaseOperator:
             n_committed += 1
             if report:
                 outcomes.append(TargetOutcome(node, mass, verdict, Action.COMMITTED, da, db))
-        stats = self.stats
-        stats["events"] += 1
-        stats["targets"] += n_targets
-        if n_below:
-            stats["below_tau_t"] += n_below
-        if n_committed:
-            stats["committed"] += n_committed
+        self._add_counts(n_targets, n_below, n_committed)
         return UpdateReport(eid, t, pred, tuple(outcomes), tuple(resolutions))
 
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float] | None:

@@ -133,7 +133,6 @@ class CalibratedOperator(BaseOperator):
         label_of = channel.label if (channel is not None and outcome_of is not None) else None
         claim_pos = c >= 0.5
         comod = self.check_compatibility
-        stats = self.stats
         n_targets = n_below = n_committed = n_quarantined = n_refused = 0
         lam = kappa = -1.0
         new_outcomes: list[int] = []
@@ -194,16 +193,7 @@ class CalibratedOperator(BaseOperator):
                     outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))
             if comod and verdict is _CORR and prov._pending_by_pair:
                 resolutions += queues.resolve_disagreements(prov, node, pred, t)
-        stats["events"] += 1
-        stats["targets"] += n_targets
-        if n_below:
-            stats["below_tau_t"] += n_below
-        if n_committed:
-            stats["committed"] += n_committed
-        if n_quarantined:
-            stats["quarantined"] += n_quarantined
-        if n_refused:
-            stats["refused"] += n_refused
+        self._add_counts(n_targets, n_below, n_committed, n_quarantined, n_refused)
         if new_outcomes:
             add = self.calibrator_.add
             for y in new_outcomes:
