@@ -34,30 +34,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold P >= tau (default 0.5)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--out", metavar="FILE", default=None, help="also write the scores as JSON to FILE")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="evaluate the (source, operator) cells in parallel processes (same output as serial)")
+    parser.add_argument("--executor", choices=["local", "ray"], default="local",
+                        help="local process pool, or a Ray cluster (pip install 'sgbelief[ray]'; RAY_ADDRESS)")
 
 
 def run(args: argparse.Namespace) -> int:
-    from sgbelief.query.retrieval import evaluate_retrieval, format_scores, scannet_retrieval_data, suite_retrieval_data
+    from sgbelief.query.retrieval import RetrievalSource, evaluate_retrieval, evaluate_sources, format_scores
 
     if bool(args.scenes) == bool(args.suite):
         print("sgbelief retrieval: error: give either --scenes (with --events) or --suite", file=sys.stderr)
         return 2
+    if args.workers < 0:
+        print("sgbelief retrieval: error: --workers must be >= 0", file=sys.stderr)
+        return 2
     operators = [o.strip() for o in args.operators.split(",") if o.strip()]
-    datasets = []
+    sources = []
     if args.scenes:
         if not args.events:
             print("sgbelief retrieval: error: --scenes needs --events EVENTS.jsonl", file=sys.stderr)
             return 2
-        datasets.append(scannet_retrieval_data(args.scenes, args.events, args.vocab or "scannet", labels=args.labels,
-                                               queries=args.queries or "scannet", channel=args.channel))
-    for suite in args.suite:
-        datasets.append(suite_retrieval_data(suite, args.vocab, queries=args.queries))
+        sources.append(RetrievalSource("scannet", str(args.scenes), events=str(args.events), vocab=args.vocab,
+                                       queries=args.queries, labels=args.labels, channel=args.channel))
+    sources += [RetrievalSource("suite", str(suite), vocab=args.vocab, queries=args.queries) for suite in args.suite]
+    if args.workers > 1 or args.executor != "local":
+        # one task per (source, operator), results back in input order: the serial output
+        results = evaluate_sources(sources, operators, tau=args.tau, operator_config=args.operator_config,
+                                   workers=args.workers, executor=args.executor)
+    else:
+        results = []
+        for src in sources:
+            data = src.load()
+            results.append((data.name, evaluate_retrieval(data, operators, tau=args.tau,
+                                                          operator_config=args.operator_config)))
     report = []
-    for data in datasets:
-        scores = evaluate_retrieval(data, operators, tau=args.tau, operator_config=args.operator_config)
-        report.append({"source": data.name, "tau": args.tau, "scores": [s.to_dict() for s in scores]})
+    for name, scores in results:
+        report.append({"source": name, "tau": args.tau, "scores": [s.to_dict() for s in scores]})
         if not args.json:
-            print(format_scores(scores, title=f"{data.name}  (tau = {args.tau})"))
+            print(format_scores(scores, title=f"{name}  (tau = {args.tau})"))
             print()
     if args.json:
         json.dump(report, sys.stdout, indent=2)

@@ -12,6 +12,10 @@ For every operator: replay the event log into a fresh graph, then for every name
   the operator's probability (``operator.probability``, i.e. after its recalibration, if any) and
   the geometric components are the same ground-truth indicators;
 * **F1** of retrieved vs. positives (``sgbelief.eval.metrics.retrieval_f1``).
+
+Operators are independent once the pools and positives are fixed, so :func:`evaluate_sources` runs
+one task per (source, operator) over processes or Ray (``sgbelief retrieval --workers N``) with the
+same scores, in the same order, as :func:`evaluate_retrieval`.
 """
 
 from __future__ import annotations
@@ -26,7 +30,8 @@ from sgbelief.query.named import NamedQuery, load_query_set, named_queries
 from sgbelief.query.relations import DEFAULT_REGISTRY, RelationConfig, RelationRegistry
 
 __all__ = ["RetrievalData", "CompoundScore", "evaluate_retrieval", "scannet_retrieval_data",
-           "suite_retrieval_data", "format_scores"]
+           "suite_retrieval_data", "format_scores", "RetrievalSource", "RetrievalJob", "run_retrieval_job",
+           "evaluate_sources"]
 
 
 @dataclass
@@ -89,14 +94,11 @@ def _event_obj(rec: Any, i: int) -> Any:
                                  rec.id or f"ev{i:08d}")
 
 
-def evaluate_retrieval(data: RetrievalData, operators: Iterable[str], *, tau: float = 0.5,
-                       operator_config: Any = None, registry: RelationRegistry | None = None) -> list[CompoundScore]:
-    """Scores for every (named compound, operator); see the module docstring for the definitions."""
-    from sgbelief.eval.metrics import retrieval_f1
-    from sgbelief.fusion.registry import make_operator
+_Plans = tuple[dict[str, dict[Any, "bool | None"]], dict[str, tuple[NamedQuery, list[Any], set[Any]]]]
 
-    registry = registry or DEFAULT_REGISTRY
-    gt_config = replace(data.config, use_committed_labels=False)
+
+def _ground_truth_plans(data: RetrievalData, registry: RelationRegistry, gt_config: RelationConfig) -> _Plans:
+    """Per compound: its pool and positives, plus the ground-truth geometric values (shared by all operators)."""
     gt_graph = _build_graph(data.nodes)
     gt_engine = QueryEngine(gt_graph, registry=registry, config=gt_config, require_evidence=False)
 
@@ -139,32 +141,140 @@ def evaluate_retrieval(data: RetrievalData, operators: Iterable[str], *, tau: fl
             for node in pool:
                 if node not in vals:
                     vals[node] = gt_engine.geometric(node, lit.name) if node in data.nodes else None
+    return geo_values, plans
 
+
+def _score_operator(data: RetrievalData, op_name: Any, plans: _Plans, *, tau: float, operator_config: Any,
+                    registry: RelationRegistry, gt_config: RelationConfig) -> list[CompoundScore]:
+    """Replay the events through one operator on a fresh graph and score every compound."""
+    from sgbelief.eval.metrics import retrieval_f1
+    from sgbelief.fusion.registry import make_operator
+
+    geo_values, compound_plans = plans
+    graph = _build_graph(data.nodes, data.vocabulary)
+    op = make_operator(op_name, operator_config, data.vocabulary)
+    channel = data.channel_factory()
+    for i, rec in enumerate(data.events):
+        op.update(graph, _event_obj(rec, i), channel)
+    engine = QueryEngine(graph, registry=registry, config=gt_config, tau=tau, require_evidence=False,
+                         probability=lambda n, p, _op=op, _g=graph: _op.probability(_g, n, p))
+    for name, vals in geo_values.items():
+        engine.preload_geometric(name, vals)
+    scores: list[CompoundScore] = []
+    for key, (nq, pool, positives) in compound_plans.items():
+        compound, kinds = nq.compound, {lit.name: (BELIEF if lit in nq.belief else GEOMETRIC)
+                                        for lit in nq.compound.literals}
+        retrieved = set()
+        for node in pool:
+            m = engine.score(node, compound, kinds, prune=True, tau=tau)
+            if m is not None and m.retrieved:
+                retrieved.add(node)
+        s = retrieval_f1(retrieved, positives)
+        n = len(pool)
+        scores.append(CompoundScore(key, nq.title, nq.group, op_name if isinstance(op_name, str) else op.name,
+                                    n, len(positives), (len(positives) / n if n else 0.0), len(retrieved),
+                                    s.tp, s.fp, s.fn, s.precision, s.recall, s.f1))
+    return scores
+
+
+def evaluate_retrieval(data: RetrievalData, operators: Iterable[str], *, tau: float = 0.5,
+                       operator_config: Any = None, registry: RelationRegistry | None = None) -> list[CompoundScore]:
+    """Scores for every (named compound, operator); see the module docstring for the definitions."""
+    registry = registry or DEFAULT_REGISTRY
+    gt_config = replace(data.config, use_committed_labels=False)
+    plans = _ground_truth_plans(data, registry, gt_config)
     scores: list[CompoundScore] = []
     for op_name in operators:
-        graph = _build_graph(data.nodes, data.vocabulary)
-        op = make_operator(op_name, operator_config, data.vocabulary)
-        channel = data.channel_factory()
-        for i, rec in enumerate(data.events):
-            op.update(graph, _event_obj(rec, i), channel)
-        engine = QueryEngine(graph, registry=registry, config=gt_config, tau=tau, require_evidence=False,
-                             probability=lambda n, p, _op=op, _g=graph: _op.probability(_g, n, p))
-        for name, vals in geo_values.items():
-            engine.preload_geometric(name, vals)
-        for key, (nq, pool, positives) in plans.items():
-            compound, kinds = nq.compound, {lit.name: (BELIEF if lit in nq.belief else GEOMETRIC)
-                                            for lit in nq.compound.literals}
-            retrieved = set()
-            for node in pool:
-                m = engine.score(node, compound, kinds, prune=True, tau=tau)
-                if m is not None and m.retrieved:
-                    retrieved.add(node)
-            s = retrieval_f1(retrieved, positives)
-            n = len(pool)
-            scores.append(CompoundScore(key, nq.title, nq.group, op_name if isinstance(op_name, str) else op.name,
-                                        n, len(positives), (len(positives) / n if n else 0.0), len(retrieved),
-                                        s.tp, s.fp, s.fn, s.precision, s.recall, s.f1))
+        scores += _score_operator(data, op_name, plans, tau=tau, operator_config=operator_config,
+                                  registry=registry, gt_config=gt_config)
     return scores
+
+
+# ---------------------------------------------------------------- many sources / operators in parallel
+@dataclass(frozen=True)
+class RetrievalSource:
+    """A picklable description of one retrieval dataset, loaded where it is evaluated.
+
+    ``kind="suite"``: ``path`` is a simulated suite folder; ``kind="scannet"``: ``path`` holds the
+    ScanNet scene folders and ``events`` the event log (``labels``/``channel`` as in
+    :func:`scannet_retrieval_data`)."""
+
+    kind: str
+    path: str
+    events: str | None = None
+    vocab: str | None = None
+    queries: str | None = None
+    labels: str | None = None
+    channel: str = "scannet"
+
+    def load(self) -> RetrievalData:
+        if self.kind == "suite":
+            return suite_retrieval_data(self.path, self.vocab, queries=self.queries)
+        if self.kind == "scannet":
+            if self.events is None:
+                raise ValueError("a ScanNet retrieval source needs an event log")
+            return scannet_retrieval_data(self.path, self.events, self.vocab or "scannet", labels=self.labels,
+                                          queries=self.queries or "scannet", channel=self.channel)
+        raise ValueError(f"unknown retrieval source kind {self.kind!r} (suite | scannet)")
+
+
+@dataclass(frozen=True)
+class RetrievalJob:
+    """One (source, operator) cell of a retrieval run: the unit ``evaluate_sources`` fans out."""
+
+    source: RetrievalSource
+    operator: str
+    tau: float = 0.5
+    operator_config: str | None = None  # YAML path (None: the default configuration)
+
+
+#: per process: the last loaded source with its ground-truth plans (a worker usually gets several
+#: operators of the same source in a row)
+_LOADED: dict[RetrievalSource, tuple[RetrievalData, _Plans, RelationConfig]] = {}
+
+
+def _load_planned(source: RetrievalSource) -> tuple[RetrievalData, _Plans, RelationConfig]:
+    hit = _LOADED.get(source)
+    if hit is None:
+        data = source.load()
+        gt_config = replace(data.config, use_committed_labels=False)
+        hit = (data, _ground_truth_plans(data, DEFAULT_REGISTRY, gt_config), gt_config)
+        _LOADED.clear()
+        _LOADED[source] = hit
+    return hit
+
+
+def run_retrieval_job(job: RetrievalJob) -> tuple[str, list[CompoundScore]]:
+    """(source name, scores of the job's operator): module-level, so it runs in a worker or a Ray task."""
+    data, plans, gt_config = _load_planned(job.source)
+    scores = _score_operator(data, job.operator, plans, tau=job.tau, operator_config=job.operator_config,
+                             registry=DEFAULT_REGISTRY, gt_config=gt_config)
+    return data.name, scores
+
+
+def evaluate_sources(sources: Sequence[RetrievalSource], operators: Sequence[str], *, tau: float = 0.5,
+                     operator_config: str | None = None, workers: int = 1,
+                     executor: str = "local") -> list[tuple[str, list[CompoundScore]]]:
+    """``[(source name, scores)]`` per source, every (source, operator) evaluated independently over
+    ``workers`` processes or Ray (:func:`sgbelief.eval.parallel.run_scenes`); same scores, in the
+    same order, as :func:`evaluate_retrieval` on each source."""
+    from sgbelief.eval.parallel import run_scenes
+
+    jobs = [RetrievalJob(src, op, tau, operator_config) for src in sources for op in operators]
+    try:
+        results = run_scenes(run_retrieval_job, jobs, workers=workers, executor=executor)
+    finally:
+        _LOADED.clear()  # a serial run loaded the sources in this process
+    out: list[tuple[str, list[CompoundScore]]] = []
+    k = 0
+    for _src in sources:
+        name, scores = "", []
+        for _op in operators:
+            name, part = results[k]
+            scores += part
+            k += 1
+        out.append((name, scores))
+    return out
 
 
 def format_scores(scores: Sequence[CompoundScore], title: str = "") -> str:
