@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import gc
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -69,6 +70,8 @@ class ConceptGraphsBackend:
         tau / tau_t: commit threshold and targeting-mass threshold (default: the operator config).
         on_filter: ``"mark"`` (node kept with ``cg_filtered=True``) or ``"remove"``.
         confidence_map: optional map of the detector's raw confidence before it enters an event.
+        gc_checkpoints: call :meth:`gc_checkpoint` once per frame (after the patched per-frame
+            merge), so CPython's full collections never rescan the whole map.
     """
 
     def __init__(
@@ -88,6 +91,7 @@ class ConceptGraphsBackend:
         on_filter: str = "mark",
         confidence_map: Callable[[float], float] | None = None,
         class_names: Sequence[str] | None = None,
+        gc_checkpoints: bool = False,
     ) -> None:
         from sgbelief.fusion.channel import NullChannel
         from sgbelief.graph.scene_graph import SceneGraph
@@ -112,6 +116,8 @@ class ConceptGraphsBackend:
         self.tau_t = float(tau_t if tau_t is not None else getattr(cfg, "tau_t", 0.1))
         self.context = context
         self.graph = graph if graph is not None else SceneGraph()
+        # a graph handed in may already hold evidence the backend did not route (see _predicates_of)
+        self._external_graph = graph is not None
         self._null = NullChannel()
         self.channel_fn: DetectionLabelFn | None = None
         self.channel: Any = None
@@ -132,6 +138,10 @@ class ConceptGraphsBackend:
         self.identity = IdentityMap()
         self.class_names: dict[int, str] = dict(enumerate(class_names)) if class_names else {}
         self._names_per_node: dict[Any, Counter[tuple[int | None, str]]] = {}
+        #: predicates the backend routed to each node (O(1) label reads; the graph has no per-node index)
+        self._preds_per_node: dict[Any, set[str]] = {}
+        self._predicate_cache: dict[str, str | None] = {}
+        self._seeded: set[Any] = set()
         self._detections_per_node: Counter[Any] = Counter()
         self._routed_detections = 0
         self._last_t = None
@@ -141,13 +151,20 @@ class ConceptGraphsBackend:
         self.keep_reports = False
         self._patcher: Any = None
         self.active = True
+        self.gc_checkpoints = bool(gc_checkpoints)
+        self._froze = False
+        from sgbelief.fusion.operators.base import BaseOperator
+
+        # sgbelief's own operators can skip building per-target reports nobody reads, and their
+        # probability is the belief mean (read straight from the provenance store)
+        self._lean_update = isinstance(self.operator, BaseOperator)
+        self._mean_is_probability = (self._lean_update
+                                     and type(self.operator).probability is BaseOperator.probability)
 
     # ------------------------------------------------------------------ reading CG dicts
     def claims_of(self, obj: Mapping[str, Any]) -> list[Claim]:
         """The per-detection (class, confidence, frame) history stored in a CG object dict."""
-        ids = list(obj.get("class_id") or [])
-        confs = list(obj.get("conf") or [])
-        frames = list(obj.get("image_idx") or [])
+        ids, confs, frames = _seq(obj.get("class_id")), _seq(obj.get("conf")), _seq(obj.get("image_idx"))
         names = obj.get("class_name")
         n = max(len(ids), len(confs))
         out: list[Claim] = []
@@ -165,7 +182,7 @@ class ConceptGraphsBackend:
                 continue
             if cid is not None and cid >= 0 and name != str(cid):
                 self.class_names.setdefault(cid, name)
-            conf = float(np.asarray(confs[k]).item()) if k < len(confs) and confs[k] is not None else 1.0
+            conf = _as_float(confs[k]) if k < len(confs) and confs[k] is not None else 1.0
             t = _as_int(frames[k]) if k < len(frames) else 0
             out.append(Claim(cid, name, min(max(conf, 0.0), 1.0), t if t is not None else 0))
         return out
@@ -212,10 +229,18 @@ class ConceptGraphsBackend:
         n_events = 0
         geo_labels = geo if isinstance(geo, list) else [geo] * len(claims)
         for k, claim in enumerate(claims):
+            pred = self._predicate(claim.class_name)
             for node in targets:
-                counts = self._names_per_node.setdefault(node, Counter())
+                counts = self._names_per_node.get(node)
+                if counts is None:
+                    counts = self._names_per_node[node] = Counter()
                 counts[(claim.class_id, claim.class_name)] += 1
-            pred = self.vocabulary.predicate(claim.class_name)
+                if pred is not None:
+                    preds = self._preds_per_node.get(node)
+                    if preds is None:
+                        self._preds_per_node[node] = {pred}
+                    else:
+                        preds.add(pred)
             if pred is None or not targets:
                 continue
             conf = self.confidence_map(claim.confidence) if self.confidence_map else claim.confidence
@@ -229,7 +254,10 @@ class ConceptGraphsBackend:
             self._last_t = claim.t if self._last_t is None else max(self._last_t, claim.t)
             event = EvidenceEvent(targets=targets, predicate=pred, confidence=float(conf),
                                   context=self.context, t=int(claim.t))
-            report = self.operator.update(self.graph, event, channel)
+            if self._lean_update and not self.keep_reports:
+                report = self.operator.update(self.graph, event, channel, report=False)
+            else:
+                report = self.operator.update(self.graph, event, channel)
             if self.keep_reports:
                 self.reports.append(report)
             n_events += 1
@@ -272,10 +300,14 @@ class ConceptGraphsBackend:
             return
         if raw == keep:
             return
+        if self._external_graph:  # pick up evidence the caller's graph held before the merge moves it
+            self._predicates_of(raw)
+            self._predicates_of(keep)
         self.graph.merge_nodes(keep, raw)
         self._detections_per_node[keep] += self._detections_per_node.pop(raw, 0)
         names = self._names_per_node.setdefault(keep, Counter())
         names.update(self._names_per_node.pop(raw, Counter()))
+        self._preds_per_node.setdefault(keep, set()).update(self._preds_per_node.pop(raw, ()))
         self.identity.absorb(raw, keep)
 
     def refresh_geometry(self, obj: Mapping[str, Any]) -> None:
@@ -296,6 +328,7 @@ class ConceptGraphsBackend:
             return
         if self.on_filter == "remove":
             self.graph.remove_node(node)
+            self._preds_per_node.pop(node, None)
         else:
             self.graph.nx.nodes[node]["cg_filtered"] = True
         self.identity.retire(node)
@@ -314,15 +347,39 @@ class ConceptGraphsBackend:
             return 0.5
         return float(self.operator.probability(self.graph, node, predicate))
 
+    def _predicate(self, class_name: str) -> str | None:
+        """``vocabulary.predicate`` memoised per class name (called for every claim and label read)."""
+        try:
+            return self._predicate_cache[class_name]
+        except KeyError:
+            pred = self._predicate_cache[class_name] = self.vocabulary.predicate(class_name)
+            return pred
+
+    def _predicates_of(self, node: Any) -> set[str]:
+        """Predicates with evidence at ``node``: those the backend routed there, kept per node so a
+        label read costs O(predicates of the node) instead of a scan of every pair in the graph.
+        With a graph passed in by the caller, the node's pre-existing beliefs are added once."""
+        preds = self._preds_per_node.get(node)
+        if preds is None:
+            preds = self._preds_per_node[node] = set()
+        if self._external_graph and node not in self._seeded:
+            self._seeded.add(node)
+            if node in self.graph:
+                preds.update(self.graph.beliefs(node))
+        return preds
+
     def committed_predicate(self, node: Any) -> str | None:
         """The predicate with the highest committed probability (> tau), or None."""
         best, best_p = None, self.tau
-        preds = set(self.graph.beliefs(node))
-        for counts_key in self._names_per_node.get(node, ()):
-            p = self.vocabulary.predicate(counts_key[1])
-            if p is not None:
-                preds.add(p)
-        for pred in sorted(preds):
+        preds = sorted(self._predicates_of(node))
+        if self._mean_is_probability:
+            mean = self.graph.provenance.mean
+            for pred in preds:
+                p = mean(node, pred)
+                if p > best_p:
+                    best, best_p = pred, p
+            return best
+        for pred in preds:
             p = float(self.operator.probability(self.graph, node, pred))
             if p > best_p:
                 best, best_p = pred, p
@@ -331,12 +388,15 @@ class ConceptGraphsBackend:
     def _class_for(self, node: Any, pred: str | None) -> tuple[int | None, str] | None:
         if pred is None:
             return None
-        counts = self._names_per_node.get(node, Counter())
-        ranked = [(n, key) for key, n in counts.items() if self.vocabulary.predicate(key[1]) == pred]
-        if not ranked:
+        counts = self._names_per_node.get(node)
+        if not counts:
             return None
-        ranked.sort(key=lambda x: -x[0])  # stable: ties keep first-seen order
-        return ranked[0][1]
+        predicate = self._predicate
+        best, best_n = None, 0
+        for key, n in counts.items():  # most frequent; ties keep first-seen order
+            if n > best_n and predicate(key[1]) == pred:
+                best, best_n = key, n
+        return best
 
     def label_of(self, obj: Mapping[str, Any]) -> str | None:
         """Class name from the beliefs (``unknown_label`` when nothing commits; None if unseen)."""
@@ -355,6 +415,26 @@ class ConceptGraphsBackend:
         if hit is None or hit[0] is None:
             return self.unknown_class_id
         return hit[0]
+
+    # ------------------------------------------------------------------ garbage collector
+    def gc_checkpoint(self) -> None:
+        """Collect the cyclic garbage made since the last checkpoint, then freeze what survives.
+
+        CPython's generation-2 collection re-traverses every tracked object; a map holds several per
+        provenance entry (live for T_prov steps), so its pauses grow with objects x history (about
+        3 s at 5,000 objects x 500 detections). Frozen objects (``gc.freeze()``) are skipped, and
+        reference counting still frees them; each checkpoint only scans what is new since the
+        previous one. Cycles that become garbage after being frozen wait for ``gc.unfreeze()``
+        (done by :meth:`uninstall`). See docs/performance.md, "ConceptGraphs per-frame cost".
+        """
+        gc.collect()
+        gc.freeze()
+        self._froze = True
+
+    def end_frame(self) -> None:
+        """Called by the patched per-frame merge functions: the per-frame housekeeping hook."""
+        if self.gc_checkpoints:
+            self.gc_checkpoint()
 
     def evidence_count(self) -> int:
         return int(self.graph.evidence_count())
@@ -383,10 +463,13 @@ class ConceptGraphsBackend:
         self.active = True
 
     def uninstall(self) -> None:
-        """Restore every name swapped by :meth:`install`."""
+        """Restore every name swapped by :meth:`install` (and unfreeze what :meth:`gc_checkpoint` froze)."""
         if self._patcher is not None:
             self._patcher.uninstall()
             self._patcher = None
+        if self._froze:
+            gc.unfreeze()
+            self._froze = False
 
     @contextlib.contextmanager
     def patch(self, *modules: Any, generation: str | None = None, fix_list_kwargs: bool = True) -> Iterator[ConceptGraphsBackend]:
@@ -406,11 +489,28 @@ class ConceptGraphsBackend:
         return self.graph.save(path)
 
 
+def _seq(value: Any) -> list[Any]:
+    """A per-detection field as a list (None -> []; numpy arrays have no truth value)."""
+    if value is None:
+        return []
+    if isinstance(value, list):
+        return value
+    return list(value)
+
+
 def _as_int(value: Any) -> int | None:
+    if type(value) is int:
+        return value
     try:
         return int(np.asarray(value).item())
     except (TypeError, ValueError):
         return None
+
+
+def _as_float(value: Any) -> float:
+    if type(value) is float:
+        return value
+    return float(np.asarray(value).item())
 
 
 def _geometry_summary(obj: Mapping[str, Any]) -> tuple[Any, Any]:

@@ -52,6 +52,17 @@ class BeliefLabelledObject(dict):
         return copy.deepcopy(dict(self), memo)
 
 
+def _class_id_scalar(class_ids: Any, cid: int) -> Any:
+    """``cid`` as the numpy scalar type ``np.unique(np.asarray(class_ids))`` would give (int64 if not integral)."""
+    dtype = getattr(class_ids, "dtype", None)
+    if not isinstance(dtype, np.dtype):  # a list (or a torch tensor, whose dtype is not numpy's)
+        try:
+            dtype = np.asarray(class_ids[0]).dtype
+        except (IndexError, KeyError, TypeError):
+            dtype = np.dtype(np.int64)
+    return dtype.type(cid) if dtype.kind in "iu" else np.int64(cid)
+
+
 def _list_type(objects: Any) -> Any:
     from sgbelief.adapters.conceptgraphs.standins import MapObjectList
 
@@ -136,6 +147,7 @@ def make_functions(backend: ConceptGraphsBackend, generation: str, originals: di
             backend.route_detection(det, targets)
             objects[j] = merge_one(objects[j], det)
         sync_labels(objects)
+        backend.end_frame()
         return objects
 
     def overlap_merge_loop(objects: Any, overlap: np.ndarray, ratio_thresh: float, visual_thresh: float,
@@ -176,13 +188,14 @@ def make_functions(backend: ConceptGraphsBackend, generation: str, originals: di
         """
         classes = []
         for d in self:
-            ids = np.asarray(d["class_id"])
             cid = backend.class_id_of(d) if backend.active else None
             if cid is None:
-                values, counts = np.unique(ids, return_counts=True)
+                values, counts = np.unique(np.asarray(d["class_id"]), return_counts=True)
                 classes.append(values[np.argmax(counts)])
             else:
-                classes.append(ids.dtype.type(cid) if ids.dtype.kind in "iu" else np.int64(cid))
+                # the dtype the vote would return, from one element: the per-frame cost must not
+                # grow with the object's detection history
+                classes.append(_class_id_scalar(d["class_id"], cid))
         return classes
 
     ns = SimpleNamespace(generation=generation, get_most_common_class=get_most_common_class,
@@ -281,6 +294,7 @@ def make_functions(backend: ConceptGraphsBackend, generation: str, originals: di
             except Exception:  # logging only  # noqa: BLE001
                 pass
         sync_labels(objects)
+        backend.end_frame()
         return objects
 
     def merge_detections_to_objects(downsample_voxel_size, dbscan_remove_noise, dbscan_eps, dbscan_min_points,  # noqa: ANN001, ANN202

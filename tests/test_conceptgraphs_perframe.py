@@ -1,0 +1,190 @@
+"""ConceptGraphs backend: per-frame work independent of history and map size; GC checkpoints."""
+
+from __future__ import annotations
+
+import gc
+import sys
+from collections import Counter
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sgbelief.adapters.conceptgraphs import ConceptGraphsBackend
+from sgbelief.adapters.conceptgraphs.functions import make_functions
+from sgbelief.graph.provenance import ProvenanceStore
+
+CLASSES = ("chair", "table", "sofa", "bed")
+
+
+def _map(backend: ConceptGraphsBackend, n_obj: int, n_det: int) -> tuple[list[dict], list[Any]]:
+    """A map of ``n_obj`` objects built frame by frame with ``n_det`` detections each (every object
+    sees every class once ``n_det >= 4``, so maps of any history hold the same (node, predicate) pairs)."""
+    objs: list[dict] = []
+    nodes: list[Any] = []
+    for o in range(n_obj):
+        cid = o % len(CLASSES)
+        obj = {"class_id": [cid], "conf": [0.8], "image_idx": [0], "mask_idx": [o], "class_name": [CLASSES[cid]]}
+        nodes.append(backend.ensure_node(obj))
+        objs.append(obj)
+    for t in range(1, n_det):
+        for o in range(n_obj):
+            frame_detection(backend, objs[o], nodes[o], (o + t) % len(CLASSES), t)
+    return objs, nodes
+
+
+def frame_detection(backend: ConceptGraphsBackend, obj: dict, node: Any, cid: int, t: int) -> None:
+    det = {"class_id": [cid], "conf": [0.8], "image_idx": [t], "class_name": [CLASSES[cid]],
+           backend.label_key: CLASSES[cid]}
+    backend.route_detection(det, {node: 1.0})
+    obj["class_id"].append(cid)
+    obj["class_name"].append(CLASSES[cid])
+
+
+def _calls_in_one_frame(op: str, n_obj: int, n_det: int) -> Counter[str]:
+    """Work of one frame (route one detection per object, read every label): Python and C calls by
+    name, plus the number of bytecodes executed (``"<opcodes>"``; catches loops in comprehensions)."""
+    backend = ConceptGraphsBackend(op, class_names=CLASSES)
+    objs, nodes = _map(backend, n_obj, n_det)
+    calls: Counter[str] = Counter()
+
+    def prof(frame: Any, event: str, arg: Any) -> None:
+        if event == "call":
+            calls[frame.f_code.co_qualname] += 1
+        elif event == "c_call":
+            calls[getattr(arg, "__qualname__", repr(arg))] += 1
+
+    def local(frame: Any, event: str, arg: Any) -> Any:
+        if event == "opcode":
+            calls["<opcodes>"] += 1
+        return local
+
+    def trace(frame: Any, event: str, arg: Any) -> Any:
+        frame.f_trace_opcodes = True
+        return local
+
+    enabled = gc.isenabled()
+    old_trace, old_profile = sys.gettrace(), sys.getprofile()  # e.g. a coverage tracer
+    gc.disable()
+    sys.setprofile(prof)
+    sys.settrace(trace)
+    try:
+        for o, obj in enumerate(objs):
+            frame_detection(backend, obj, nodes[o], o % len(CLASSES), n_det)
+        labels = [backend.class_id_of(obj) for obj in objs]
+    finally:
+        sys.settrace(old_trace)
+        sys.setprofile(old_profile)
+        if enabled:
+            gc.enable()
+    assert len(labels) == n_obj
+    return calls
+
+
+@pytest.mark.parametrize("op", ["majority", "naive_bayes"])
+def test_per_frame_work_does_not_grow_with_detections_per_object(op: str) -> None:
+    # the same calls, one for one, whether the objects carry 5 or 120 detections
+    assert _calls_in_one_frame(op, 4, 5) == _calls_in_one_frame(op, 4, 120)
+
+
+def test_per_object_label_work_does_not_grow_with_map_size() -> None:
+    # calls = per-frame constant + per-object work x objects: the per-object part is the same at 8 and 40
+    c4, c8, c40 = (_calls_in_one_frame("majority", n, 8) for n in (4, 8, 40))
+    for name in c40.keys() | c4.keys():
+        assert c40[name] - c4[name] == 9 * (c8[name] - c4[name]), name
+
+
+def test_label_reads_never_scan_every_pair(monkeypatch: pytest.MonkeyPatch) -> None:
+    backend = ConceptGraphsBackend("majority", class_names=CLASSES)
+    objs, _nodes = _map(backend, 3, 6)
+
+    def scan(*_a: Any, **_k: Any) -> Any:
+        raise AssertionError("a label read scanned every (node, predicate) pair")
+
+    monkeypatch.setattr(ProvenanceStore, "predicates_of", scan)
+    assert all(backend.label_of(o) in CLASSES for o in objs)
+    assert all(backend.class_id_of(o) in range(len(CLASSES)) for o in objs)
+
+
+def test_labels_follow_the_beliefs_and_merges() -> None:
+    backend = ConceptGraphsBackend("majority", class_names=CLASSES)
+    a = {"class_id": [2, 2, 0], "conf": [0.9, 0.9, 0.6], "image_idx": [0, 1, 2], "mask_idx": [0, 0, 0]}
+    b = {"class_id": [3, 3, 3], "conf": [0.95] * 3, "image_idx": [0, 1, 2], "mask_idx": [1] * 3}
+    backend.ensure_node(a)
+    backend.ensure_node(b)
+    assert backend.label_of(a) == "sofa" and backend.label_of(b) == "bed"
+    backend.migrate(a, b)  # b's evidence (and predicate) moves to a's node
+    node = backend.node_of(a)
+    assert backend._predicates_of(node) == {"is_sofa", "is_chair", "is_bed"}
+    assert backend.committed_predicate(node) == "is_bed"  # mean 3.85/5 beats is_sofa's 2.8/4
+    assert backend.label_of(b) == "bed"
+
+
+def test_external_graph_evidence_is_still_read() -> None:
+    from sgbelief.fusion.events import EvidenceEvent
+    from sgbelief.fusion.registry import make_operator
+    from sgbelief.graph.scene_graph import SceneGraph
+
+    g = SceneGraph()
+    op = make_operator("majority")
+    for t in range(5):  # evidence the backend never routed
+        op.update(g, EvidenceEvent({"cg-0": 1.0}, "is_sofa", 0.99, "other", t))
+    backend = ConceptGraphsBackend("majority", graph=g, class_names=CLASSES)
+    obj = {"class_id": [0], "conf": [0.6], "image_idx": [9], "mask_idx": [0]}
+    node = backend.ensure_node(obj)
+    assert node == "cg-0"
+    assert backend.committed_predicate(node) == "is_sofa"
+
+
+def test_get_most_common_class_keeps_the_vote_dtype_without_reading_the_history() -> None:
+    backend = ConceptGraphsBackend("majority", class_names=CLASSES)
+    fns = make_functions(backend, "main")
+    seen32 = {"class_id": [np.int32(1)] * 3, "conf": [0.9] * 3, "image_idx": [0, 1, 2], "mask_idx": [0] * 3}
+    seen_py = {"class_id": [3, 3], "conf": [0.9, 0.9], "image_idx": [0, 1], "mask_idx": [1, 1]}
+    backend.ensure_node(seen32)
+    backend.ensure_node(seen_py)
+    unseen = {"class_id": [2, 0, 2], "conf": [0.9] * 3, "image_idx": [5, 6, 7], "mask_idx": [9] * 3}
+    out = fns.get_most_common_class([seen32, seen_py, unseen])
+    assert [int(x) for x in out] == [1, 3, 2]
+    assert type(out[0]) is np.int32 and type(out[1]) is np.int64  # what np.unique(np.asarray(ids)) gives
+    arr = {"class_id": np.array([3, 3], dtype=np.int16), "conf": [0.9, 0.9], "image_idx": [4, 5], "mask_idx": [2, 2]}
+    backend.ensure_node(arr)
+    assert type(fns.get_most_common_class([arr])[0]) is np.int16
+    # a seen object's history is not read again (only its first element, for the dtype)
+    reads: list[int] = []
+
+    class Ids(Sequence):
+        def __init__(self, items: list[int]) -> None:
+            self.items = items
+
+        def __len__(self) -> int:
+            return len(self.items)
+
+        def __getitem__(self, k: Any) -> Any:
+            reads.append(k)
+            return self.items[k]
+
+    seen32["class_id"] = Ids([1] * 500)
+    reads.clear()
+    assert int(fns.get_most_common_class([seen32])[0]) == 1 and reads == [0]
+
+
+def test_gc_checkpoint_freezes_and_uninstall_unfreezes() -> None:
+    backend = ConceptGraphsBackend("majority", class_names=CLASSES)
+    _map(backend, 3, 4)
+    gc.unfreeze()
+    try:
+        backend.end_frame()  # checkpoints are off by default
+        assert gc.get_freeze_count() == 0
+        backend.gc_checkpoints = True
+        backend.end_frame()
+        assert gc.get_freeze_count() > 0
+        frozen = gc.get_freeze_count()
+        _map(backend, 3, 4)
+        backend.gc_checkpoint()  # only what is new since the last checkpoint joins
+        assert gc.get_freeze_count() > frozen
+        backend.uninstall()
+        assert gc.get_freeze_count() == 0
+    finally:
+        gc.unfreeze()
