@@ -23,7 +23,7 @@ FULL = {
     "memory_comod": ["bench_memory.py", "--events", "10000000", "--operator", "comod"],
     "memory_majority": ["bench_memory.py", "--events", "3000000", "--operator", "majority"],
     "large_map": ["bench_large_map.py", "--nodes", "1000000"],
-    "conceptgraphs": ["bench_conceptgraphs.py", "--frames", "3"],
+    "conceptgraphs": ["bench_conceptgraphs.py", "--frames", "30"],
     "batched": ["bench_batched.py", "--events", "300000"],
     "parallel": ["bench_parallel.py", "--scenes", "8", "--workers", "2"],
     "queries": ["bench_queries.py", "--nodes", "10000"],
