@@ -131,3 +131,41 @@ def test_serialisation_round_trip(records) -> None:
     for k in s.pairs():
         assert _close(again.alpha_beta(*k), s.alpha_beta(*k))
     assert len([e for e in again.quarantine if e.alive]) == len([e for e in s.quarantine if e.alive and e.status is EntryStatus.QUARANTINED])
+
+
+_ORDER_SCRIPT = """
+from sgbelief.graph.provenance import ProvenanceStore
+s = ProvenanceStore(remember_compacted=50)
+for i in range(400):
+    s.record(f"n{(i * 7) % 31}", ("is_car", "is_road", "is_pedestrian")[i % 3], f"e{i}", i // 4, 0.4, 0.6)
+s.compact(60)
+s.compact(95)
+print(",".join(s._compacted_order))
+"""
+
+
+def test_compaction_order_is_independent_of_hash_seed() -> None:
+    # pairs are visited in the order their oldest folded entry arrived, not in a set's hash order,
+    # so the compacted-id memory (saved with the graph) is the same in every process
+    import subprocess
+    import sys
+
+    outs = {
+        subprocess.run([sys.executable, "-c", _ORDER_SCRIPT], capture_output=True, text=True, check=True,
+                       env={**__import__("os").environ, "PYTHONHASHSEED": seed}).stdout
+        for seed in ("1", "2", "3")
+    }
+    assert len(outs) == 1
+    ids = outs.pop().strip().split(",")
+    assert len(ids) == 50 and ids[-1].startswith("e")
+
+
+def test_remembered_ids_are_bounded_and_resizable() -> None:
+    s = ProvenanceStore(remember_compacted=3)
+    for i in range(10):
+        s.record("v", "is_car", f"e{i}", i, 1.0, 0.0)
+    s.compact(8)
+    assert list(s._compacted_order) == ["e5", "e6", "e7"]
+    assert s.is_compacted("e7") and not s.is_compacted("e1")
+    s.remember_compacted = 2
+    assert list(s._compacted_order) == ["e6", "e7"]

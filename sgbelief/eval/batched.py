@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from itertools import chain, repeat
@@ -313,66 +312,32 @@ class _IdRuns:
         return cls(events, first_entry, fold, run, emptied, creator, unique)
 
 
-def _visit_positions(pairs: list[tuple[Any, str]], block_pairs: np.ndarray, block_ends: list[int]) -> np.ndarray:
-    """Per block of distinct pair ids (in first-appearance order), each pair's position when a
-    set that got their keys added one by one in that order is iterated: the order in which
-    :meth:`ProvenanceStore.compact` visits its dirty pairs (a set's iteration order depends only
-    on the hashes and on the order in which they were added; re-adding a key changes nothing)."""
-    pid = block_pairs.tolist()
-    seen = np.zeros(len(pairs), dtype=bool)
-    seen[block_pairs] = True
-    distinct = np.flatnonzero(seen).tolist()
-    pair_of = dict(zip(map(pairs.__getitem__, distinct), distinct))
-    visited: list[int] = []
-    begin = 0
-    for end in block_ends:
-        dirty: set[tuple[Any, str]] = set()
-        deque(map(dirty.add, map(pairs.__getitem__, pid[begin:end])), maxlen=0)  # dirty.add(key), key by key
-        visited.extend(map(pair_of.__getitem__, dirty))
-        begin = end
-    order = np.array(visited, dtype=np.int64)
-    slot = np.empty(len(pairs), dtype=np.int64)
-    out = np.empty(len(pid), dtype=np.int64)
-    begin = 0
-    for end in block_ends:
-        slot[order[begin:end]] = np.arange(end - begin)
-        out[begin:end] = slot[block_pairs[begin:end]]
-        begin = end
-    return out
-
-
 def _remember(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, pair: np.ndarray, ev: np.ndarray,
               fold_k: np.ndarray, n_fold: int) -> None:
     """Fill the bounded memory of compacted event ids exactly as the streaming store does.
 
-    Compaction k visits its dirty pairs in the iteration order of a set built from them in
-    stream order and folds each pair's entries in log order; an id is released when the last
-    live entry of its list is folded. Only the compactions whose ids stay in the memory need that
-    visiting order (with repeated ids, all of them: the store's set discards depend on the
-    whole sequence).
+    Compaction k visits its dirty pairs in the order their first folded entry arrived (stream
+    order) and folds each pair's entries in log order; an id is released when the last live
+    entry of its list is folded, and the memory keeps the last ``remember_compacted`` releases.
+    Only the compactions whose ids stay in the memory need that order.
     """
     cap = prov.remember_compacted
     unit_fold = idr.fold[idr.emptied]  # one released id per emptied list
     n_rem = len(unit_fold)
     if cap <= 0 or n_rem == 0:
         return
-    k0 = int(np.sort(unit_fold)[n_rem - cap]) if (idr.unique and n_rem > cap) else 0
+    k0 = int(np.sort(unit_fold)[n_rem - cap]) if n_rem > cap else 0
     lo = int(np.searchsorted(fold_k[:n_fold], k0, side="left"))  # entries folded from compaction k0 on
     n_sc = n_fold - lo
     sc_pair, sc_fold = pair[lo:n_fold], fold_k[lo:n_fold]
-    # (pair, compaction) groups of those entries and, per compaction, the visiting order of its pairs
+    # (pair, compaction) groups of those entries; a group's visit position is its first entry's
+    # stream position (compactions fold in stream order, so this orders compaction by compaction)
     by_pair = _stable_argsort(sc_pair, len(cols.pairs))
     gp, gk = sc_pair[by_pair], sc_fold[by_pair]
     g_start = np.flatnonzero(np.r_[True, (gp[1:] != gp[:-1]) | (gk[1:] != gk[:-1])])
     group_of = np.empty(n_sc, dtype=np.int64)
     group_of[by_pair] = np.repeat(np.arange(len(g_start)), np.diff(np.r_[g_start, n_sc]))
-    is_first = np.zeros(n_sc, dtype=bool)
-    is_first[by_pair[g_start]] = True
-    firsts = np.flatnonzero(is_first)  # each group's first entry, in stream order
-    grp = group_of[firsts]
-    block_ends = np.r_[_starts(sc_fold[firsts])[1:], len(firsts)].tolist()
-    visit = np.empty(len(g_start), dtype=np.int64)
-    visit[grp] = _visit_positions(cols.pairs, gp[g_start][grp], block_ends)
+    visit = by_pair[g_start]  # stream position of each group's first entry
     # an entry is folded at (visit position of its pair, stream position); an event with the
     # latest of its entries (they are contiguous); an id with the latest event of its run
     entry_key = visit[group_of] * n_sc + np.arange(n_sc)
@@ -384,29 +349,10 @@ def _remember(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, pair: np.
     unit_key = np.maximum.reduceat(ev_key, _starts(idr.run))[idr.run[idr.emptied]]
     sel = unit_fold >= k0
     unit_key, unit_fold = unit_key[sel], unit_fold[sel] - k0
-    stride = int(unit_key.max()) + 1
-    if int(unit_fold.max()) < (1 << 62) // stride:  # one int64 sort key: (compaction, key)
-        order = np.argsort(unit_fold * stride + unit_key)
-    else:
-        order = np.lexsort((unit_key, unit_fold))
-    released_events = idr.events[idr.emptied][sel][order]
-    memory, remembered = prov._compacted_order, prov._compacted_ids
-    if idr.unique:
-        tail = list(map(cols.event_ids.__getitem__, released_events[-cap:].tolist()))
-        memory.extend(tail)
-        remembered.update(tail)
-        return
-    seq = list(map(cols.event_ids.__getitem__, released_events.tolist()))
-    # repeated ids: mirror the store, which adds the ids one pair's fold releases as a batch and
-    # then trims the memory to its bound
-    batch = unit_fold[order] * (stride // n_sc + 1) + unit_key[order] // n_sc
-    bounds = np.r_[_starts(batch), len(batch)].tolist()
-    for begin, end in zip(bounds[:-1], bounds[1:]):
-        released = seq[begin:end]
-        remembered.update(released)
-        memory.extend(released)
-        for _ in range(len(memory) - cap):
-            remembered.discard(memory.popleft())
+    # visit positions grow with the compaction, so the key alone orders (compaction, key)
+    order = np.argsort(unit_key, kind="stable")
+    released_events = idr.events[idr.emptied][sel][order][-cap:]
+    prov._compacted_order.extend(map(cols.event_ids.__getitem__, released_events.tolist()))
 
 
 def _index_live(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, ev: np.ndarray, n_fold: int,
@@ -577,7 +523,7 @@ def provenance_signature(graph: SceneGraph) -> dict[str, Any]:
         "by_event": [(k, [entry(e) for e in v]) for k, v in prov._by_event.items()],
         "timeline": [entry(e) for e in prov._timeline],
         "compacted_order": list(prov._compacted_order),
-        "compacted_ids": set(prov._compacted_ids),
+        "compacted_memory_bound": prov._compacted_order.maxlen,
         "n_compacted": prov.n_compacted,
         "prior": (prov.prior_alpha, prov.prior_beta, prov.remember_compacted),
     }

@@ -950,8 +950,6 @@ def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[
     for i in pending[np.argsort(t[pending], kind="stable")].tolist():
         e = entries[i]
         by_pair.setdefault((e.node, e.predicate), []).append(e)
-    kept = compacted[-store.remember_compacted:] if store.remember_compacted > 0 else []
-    store._compacted_order = deque(kept)
-    store._compacted_ids = set(kept)
+    store._compacted_order.extend(compacted)  # bounded by remember_compacted: keeps the newest
     store.n_compacted = h.n_compacted
     return store

@@ -55,9 +55,10 @@ PENDING: frozenset[EntryStatus] = frozenset({EntryStatus.REFUSED, EntryStatus.QU
 _STATUS_BY_VALUE = {s.value: s for s in EntryStatus}
 _COMMITTED = EntryStatus.COMMITTED
 _COMPACTED = EntryStatus.COMPACTED
-#: the same sets keyed by identity (hashing a str-Enum member runs Python code)
+_REFUSED = EntryStatus.REFUSED
+_QUARANTINED = EntryStatus.QUARANTINED
+#: the counted set keyed by identity (hashing a str-Enum member runs Python code)
 _COUNTED_IDS = frozenset(id(s) for s in COUNTED)
-_PENDING_IDS = frozenset(id(s) for s in PENDING)
 
 
 class ProvenanceEntry:
@@ -152,18 +153,28 @@ class ProvenanceStore:
         remember_compacted: int = 100_000,
     ) -> None:
         self.prior_alpha, self.prior_beta = float(prior[0]), float(prior[1])
+        self._compacted_order: deque[str] = deque(maxlen=0)
         self.remember_compacted = int(remember_compacted)
         self._pairs: dict[PairKey, _PairLog] = {}
         self._by_event: dict[str, list[ProvenanceEntry]] = {}
         # every live, not-yet-compacted entry in arrival order (drives amortised compaction)
         self._timeline: deque[ProvenanceEntry] = deque()
-        self._compacted_ids: set[str] = set()
-        self._compacted_order: deque[str] = deque()
         self.n_compacted = 0
         # queues: pending entries in arrival order (lazy deletion) and indexed by pair
         self.quarantine: deque[ProvenanceEntry] = deque()
         self.disagreement: deque[ProvenanceEntry] = deque()
         self._pending_by_pair: dict[PairKey, list[ProvenanceEntry]] = {}
+
+    @property
+    def remember_compacted(self) -> int:
+        """How many of the most recently compacted event ids are remembered (oldest dropped first)."""
+        return self._remember
+
+    @remember_compacted.setter
+    def remember_compacted(self, n: int) -> None:
+        self._remember = int(n)
+        # the most recent compacted event ids, oldest first (the bounded deque drops the oldest)
+        self._compacted_order = deque(self._compacted_order, maxlen=max(self._remember, 0))
 
     # ------------------------------------------------------------------ reads
     def __len__(self) -> int:
@@ -331,7 +342,7 @@ class ProvenanceStore:
             seen.add(eid)
             entries = self._by_event.get(eid)
             if entries is None:
-                if eid in self._compacted_ids:
+                if eid in self._compacted_order:  # a linear scan, on this error path only
                     raise RetractionError(
                         f"event {eid!r} was folded into a compacted increment (older than the provenance "
                         "horizon T_prov) and can no longer be retracted"
@@ -385,44 +396,61 @@ class ProvenanceStore:
         """Fold every settled entry with ``t < before_t`` into one equivalent increment per pair.
 
         Pending entries are never folded. Cost is amortised O(1) per entry: only pairs that
-        received entries older than the horizon are visited. Returns the number of entries folded.
+        received entries older than the horizon are visited, in the order their oldest such
+        entry arrived (deterministic: the compacted-id memory fills in that order). Returns the
+        number of entries folded.
         """
-        dirty: set[PairKey] = set()
+        dirty: dict[PairKey, None] = {}
         timeline = self._timeline
+        popleft = timeline.popleft
         while timeline and timeline[0].t < before_t:
-            entry = timeline.popleft()
+            entry = popleft()
             if entry.alive:
-                dirty.add((entry.node, entry.predicate))
+                dirty[(entry.node, entry.predicate)] = None
+        pairs = self._pairs
+        gone: list[str] = []
         folded_total = 0
         for key in dirty:
-            log = self._pairs.get(key)
+            log = pairs.get(key)
             if log is not None:
-                folded_total += self._compact_pair(log, before_t)
+                folded_total += self._compact_pair(log, before_t, gone)
+        if gone:
+            self._compacted_order.extend(gone)
         return folded_total
 
-    def _compact_pair(self, log: _PairLog, before_t: int) -> int:
+    def _compact_pair(self, log: _PairLog, before_t: int, gone: list[str]) -> int:
+        """Fold one pair's settled entries older than ``before_t`` into its compacted bucket;
+        the ids of events whose last live entry is folded are appended to ``gone``."""
         keep: list[ProvenanceEntry] = []
         fold: list[ProvenanceEntry] = []
         bucket: ProvenanceEntry | None = None
-        pending_ids = _PENDING_IDS
+        refused, quarantined = _REFUSED, _QUARANTINED
         for entry in log.entries:
             st = entry.status
             if st is _COMPACTED:
                 bucket = entry
-            elif entry.t < before_t and id(st) not in pending_ids:
+            elif entry.t < before_t and st is not refused and st is not quarantined:
                 fold.append(entry)
             else:
                 keep.append(entry)
         if not fold:
             return 0
-        counted_ids = _COUNTED_IDS
-        counted = [e for e in fold if id(e.status) in counted_ids]
-        d_alpha = math.fsum([e.d_alpha for e in counted])
-        d_beta = math.fsum([e.d_beta for e in counted])
-        n = sum([e.n_folded for e in fold])
-        t_max = max([e.t for e in fold])
-        if bucket is None:
+        if len(fold) == 1:  # the common case: fsum of one value is that value
             first = fold[0]
+            if id(first.status) in _COUNTED_IDS:
+                d_alpha, d_beta = first.d_alpha + 0.0, first.d_beta + 0.0
+            else:
+                d_alpha = d_beta = 0.0
+            n, t_max = first.n_folded, first.t
+        else:
+            first = fold[0]
+            counted_ids = _COUNTED_IDS
+            counted = [e for e in fold if id(e.status) in counted_ids]
+            d_alpha = math.fsum([e.d_alpha for e in counted])
+            d_beta = math.fsum([e.d_beta for e in counted])
+            n = sum([e.n_folded for e in fold])
+            t_max = max([e.t for e in fold])
+        if bucket is None:
             bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, _COMPACTED, first.node, first.predicate)
             bucket.n_folded = n
         else:
@@ -432,7 +460,6 @@ class ProvenanceStore:
             if t_max > bucket.t:
                 bucket.t = t_max
         by_event = self._by_event
-        gone: list[str] = []
         for entry in fold:
             entry.alive = False
             eid = entry.event_id
@@ -450,30 +477,16 @@ class ProvenanceStore:
                     if not same_event:
                         del by_event[eid]
                         gone.append(eid)
-        if gone and self.remember_compacted > 0:
-            self._compacted_ids.update(gone)
-            order = self._compacted_order
-            order.extend(gone)
-            excess = len(order) - self.remember_compacted
-            if excess > 0:
-                ids = self._compacted_ids
-                popleft = order.popleft
-                for _ in range(excess):
-                    ids.discard(popleft())
         log.entries = [bucket, *keep]
         self.n_compacted += len(fold)
         return len(fold)
 
     def _remember_compacted(self, event_id: str) -> None:
-        if self.remember_compacted <= 0:
-            return
-        self._compacted_ids.add(event_id)
         self._compacted_order.append(event_id)
-        while len(self._compacted_order) > self.remember_compacted:
-            self._compacted_ids.discard(self._compacted_order.popleft())
 
     def is_compacted(self, event_id: str) -> bool:
-        return event_id in self._compacted_ids
+        """Whether the id is among the ``remember_compacted`` most recently compacted (O(n) scan)."""
+        return event_id in self._compacted_order
 
     # -------------------------------------------------------- node life cycle
     def remove_node(self, node: Any) -> int:
