@@ -65,6 +65,13 @@ def test_batched_equals_streaming(name: str, seed: int) -> None:
 
 
 @pytest.mark.parametrize("name", BATCHED_OPERATORS)
+def test_batched_follows_a_shorter_compaction_interval(name: str) -> None:
+    config = {"t_prov": 30, "t_compact": 4, "tau_t": 0.1}
+    graph = _assert_same(random_records(9, 900, n_nodes=25), name, config)
+    assert graph.provenance.n_compacted > 0 and graph.meta["compaction_interval"] == 4
+
+
+@pytest.mark.parametrize("name", BATCHED_OPERATORS)
 @pytest.mark.parametrize("remember", [0, 1, 37, 250, 100_000])
 def test_compacted_id_memory_cut_inside_a_compaction(name: str, remember: int) -> None:
     # many pairs per compaction: the bounded memory keeps the ids of the last compactions in the

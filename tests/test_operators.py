@@ -262,6 +262,45 @@ def test_compaction_runs_every_t_prov_and_keeps_beliefs() -> None:
     assert g.evidence_count() == 400
 
 
+def test_compaction_interval_spreads_the_folding_over_smaller_passes() -> None:
+    # same horizon T_prov, passes every 5 steps instead of every 50: the same entries end up
+    # folded (beliefs and evidence count unchanged), but no single pass folds more than ~5 steps'
+    # worth of entries
+    def run(t_compact: int | None) -> tuple[SceneGraph, list[int]]:
+        op = make_operator("comod", {"t_prov": 50, "t_compact": t_compact}, TABLE)
+        g = SceneGraph()
+        passes = []
+        for t in range(400):
+            before = op.stats["compacted"]
+            for j in range(4):
+                label = "car" if (t + j) % 3 else "building"
+                op.update(g, EvidenceEvent({f"n{j}": 1.0}, "is_car", 0.6 + 0.01 * j, "k", t), FrameLabels({f"n{j}": label}))
+            passes.append(op.stats["compacted"] - before)
+        return g, passes
+
+    g_default, p_default = run(None)
+    g_short, p_short = run(5)
+    assert max(p_default) >= 8 * max(p_short) > 0
+    assert g_short.evidence_count() == g_default.evidence_count()
+    for key in g_default.provenance.pairs():
+        assert g_short.provenance.alpha_beta(*key) == pytest.approx(g_default.provenance.alpha_beta(*key), rel=1e-12)
+        assert all(e.t >= 399 - 50 - 5 for e in g_short.provenance.entries(*key) if e.event_id is not None and e.status.value == "committed")
+    assert g_short.meta["compaction_interval"] == 5 and "compaction_interval" not in g_default.meta
+
+
+def test_changing_the_compaction_interval_of_a_saved_graph_keeps_compacting() -> None:
+    g = SceneGraph()
+    short = make_operator("majority", {"t_prov": 20, "t_compact": 2}, TABLE)
+    for t in range(100):
+        short.update(g, EvidenceEvent({"v": 1.0}, "is_car", 0.7, "k", t))
+    assert g.meta["compaction_epoch"] == 49
+    long = make_operator("majority", {"t_prov": 20}, TABLE)  # back to passes every T_prov
+    for t in range(100, 300):
+        long.update(g, EvidenceEvent({"v": 1.0}, "is_car", 0.7, "k", t))
+    assert long.stats["compacted"] > 150 and "compaction_interval" not in g.meta
+    assert len(g.provenance.entries("v", "is_car")) <= 41
+
+
 def _invariance_stream(seed: int = 5):
     """Nodes with hidden truth; per-class reliability; every slice gets verification outcomes."""
     rng = random.Random(seed)

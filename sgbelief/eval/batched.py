@@ -428,11 +428,14 @@ def batched_replay(
     stats["committed"] = n
 
     # ---- time: clock and compaction schedule (a compaction runs when an event opens a new epoch)
-    epoch = t_ev // cfg.t_prov
+    interval = cfg.compaction_interval
+    epoch = t_ev // interval
     opens = np.flatnonzero(epoch > np.maximum.accumulate(np.r_[0, epoch[:-1]]))
     graph.clock = max(int(t_ev[-1]), -1)
     if len(opens):
         graph.meta["compaction_epoch"] = int(epoch[opens[-1]])
+        if interval != cfg.t_prov:
+            graph.meta["compaction_interval"] = interval
     if n == 0:
         return graph, stats
     # entry e exists from its event on; compaction k folds it if k runs after that event and its

@@ -71,11 +71,22 @@ class OperatorConfig(_Frozen):
     k: float = Field(4.0, ge=1.0, description="timeout release weight divisor (w / k)")
     w0: float = Field(1.0, gt=0.0, description="base per-evidence weight")
     t_prov: int = Field(1000, ge=1, description="provenance compaction horizon")
+    t_compact: int | None = Field(
+        None,
+        ge=1,
+        description="time steps between compaction passes (null: T_prov); a shorter interval spreads "
+        "the folding over more, smaller passes (lower worst-case latency of one update)",
+    )
     t_disagree: int = Field(10, ge=0, description="conflict-drop window of Q_bot")
     tau: float = Field(0.5, ge=0.0, lt=1.0, description="commit threshold")
     tau_t: float = Field(0.1, ge=0.0, lt=1.0, description="targeting-mass threshold")
     calibration: CalibrationConfig = CalibrationConfig()
     baselines: BaselinesConfig = BaselinesConfig()
+
+    @property
+    def compaction_interval(self) -> int:
+        """Time steps between compaction passes: ``t_compact``, or T_prov when unset."""
+        return self.t_compact if self.t_compact is not None else self.t_prov
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> OperatorConfig:

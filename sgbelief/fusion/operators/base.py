@@ -59,15 +59,26 @@ class BaseOperator:
 
     # ---------------------------------------------------------------- time
     def tick(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
-        """Advance to time t: queue timeouts, then compaction every T_prov steps (Alg. 1, last lines)."""
+        """Advance to time t: queue timeouts, then a compaction pass (entries older than T_prov are
+        folded) every ``compaction_interval`` steps (T_prov by default; Alg. 1, last lines)."""
         if t <= graph.clock:
             return []
         graph.clock = t
         cfg = self.config
         out = self._timeouts(graph, t)
-        epoch = t // cfg.t_prov
-        if epoch > graph.meta.get("compaction_epoch", 0):
-            graph.meta["compaction_epoch"] = epoch
+        interval = cfg.compaction_interval
+        epoch = t // interval
+        meta = graph.meta
+        last = meta.get("compaction_epoch", 0)
+        saved_interval = meta.get("compaction_interval", cfg.t_prov)
+        if saved_interval != interval:  # the graph was compacted under another interval
+            last = last * saved_interval // interval
+        if epoch > last:
+            meta["compaction_epoch"] = epoch
+            if interval != cfg.t_prov:
+                meta["compaction_interval"] = interval
+            elif "compaction_interval" in meta:
+                del meta["compaction_interval"]
             self.stats["compacted"] += graph.provenance.compact(t - cfg.t_prov)
         return out
 

@@ -1,0 +1,25 @@
+"""Smoke runs of benchmark scripts at tiny sizes (they must keep working; no timing is asserted)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def test_latency_benchmark_reports_both_schedules() -> None:
+    out = subprocess.run(
+        [sys.executable, str(BENCH / "bench_latency.py"), "--events", "24000", "--pairs", "600",
+         "--events-per-step", "10", "--operator", "majority", "--intervals", "default,10", "--json"],
+        capture_output=True, text=True, check=True, timeout=300,
+    ).stdout
+    res = json.loads(out.strip().splitlines()[-1])
+    default, short = res["schedules"]["default"], res["schedules"]["10"]
+    assert default["steps"] == short["steps"] == 2400
+    assert default["compaction_passes"] == 2 and short["compaction_passes"] == 239
+    # the same horizon: a short interval folds at least what the default schedule folded
+    assert short["compacted_entries"] >= default["compacted_entries"] > 0
+    assert short["max_step_ratio_to_first"] > 0 and short["throughput_ratio_to_first"] > 0
