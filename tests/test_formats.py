@@ -122,6 +122,25 @@ def test_writer_is_atomic_on_error(tmp_path):
     assert [x.name for x in tmp_path.iterdir()] == ["e.jsonl"]
 
 
+def test_atomic_writes_get_a_normal_file_mode(tmp_path):
+    # the temp file behind an atomic write is created 0600; the result must not stay private
+    import os
+    import stat
+
+    from sgbelief.graph.persistence import atomic_write_text
+
+    old = os.umask(0o022)
+    try:
+        p = tmp_path / "e.jsonl"
+        write_events(p, [GOOD])
+        assert stat.S_IMODE(p.stat().st_mode) == 0o644
+        p.chmod(0o640)  # an existing file keeps its mode
+        atomic_write_text(p, "x")
+        assert stat.S_IMODE(p.stat().st_mode) == 0o640
+    finally:
+        os.umask(old)
+
+
 # fast path and pydantic path must agree on acceptance
 _json_scalar = st.one_of(st.none(), st.booleans(), st.integers(-3, 3), st.floats(allow_nan=True, allow_infinity=True),
                          st.text(max_size=3))

@@ -84,3 +84,70 @@ def test_several_scenes_with_workers_save_binary_graphs(tmp_path: Path) -> None:
         g = SceneGraph.load(tmp_path / "g" / "comod" / name)
         assert (tmp_path / "g" / "comod" / name / "graph.npz").exists()
         assert g.probability("s/car", "is_pedestrian") == 0.5
+
+
+def _replay_json(tmp_path: Path, ev: Path, truth: Path, engine: str, tag: str, *extra: str) -> dict:
+    out = tmp_path / f"{tag}.json"
+    rc = main(["replay", str(ev), "--truth", str(truth), "--vocab", "kitti360", "--json", str(out), "--no-progress",
+               "--engine", engine, "--save-graph", str(tmp_path / f"g_{tag}"), *extra])
+    assert rc == 0
+    doc = json.loads(out.read_text())
+    for d in doc.values():
+        d.pop("events_per_s")
+    return doc
+
+
+@pytest.mark.parametrize("engine", ["batched", "auto"])
+def test_batched_engine_gives_the_streaming_results(tmp_path: Path, engine: str) -> None:
+    from sgbelief.eval.batched import provenance_signature
+
+    bad = json.dumps({"t": 3, "targets": {"s/car": 1.0}, "predicate": "is_car", "confidence": 1.7, "context": "vlm", "geometric": {}})
+    ev, truth = _write_stream(tmp_path, bad)  # a skipped line: default ids follow the file's line numbers
+    config = tmp_path / "ops.yaml"
+    config.write_text("t_prov: 9\n")  # several compactions inside the stream
+    extra = ("--skip-bad-lines", "--config", str(config))
+    streamed = _replay_json(tmp_path, ev, truth, "streaming", "s", *extra)
+    waved = _replay_json(tmp_path, ev, truth, engine, "b", *extra)
+    assert waved == streamed
+    assert streamed["majority"]["stats"]["compacted"] > 0
+    for name in ("majority", "naive_bayes", "overwrite", "comod"):
+        a = SceneGraph.load(tmp_path / "g_s" / name)
+        b = SceneGraph.load(tmp_path / "g_b" / name)
+        assert provenance_signature(a) == provenance_signature(b)
+
+
+def test_batched_engine_needs_ordered_times_and_names_the_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    back = json.dumps({"t": 1, "targets": {"s/car": 1.0}, "predicate": "is_car", "confidence": 0.7, "context": "vlm", "geometric": {}})
+    ev, truth = _write_stream(tmp_path)
+    lines = ev.read_text().splitlines()
+    lines.insert(20, back)  # line 21 goes back in time
+    ev.write_text("\n".join(lines) + "\n")
+    args = ["replay", str(ev), "--truth", str(truth), "--vocab", "kitti360", "--no-progress", "--operators", "majority"]
+    assert main([*args, "--engine", "batched"]) == 1
+    err = capsys.readouterr().err
+    assert "events.jsonl:21" in err and "non-decreasing" in err
+    assert main([*args, "--engine", "auto"]) == 0  # falls back to the streaming engine
+    bad = json.dumps({"t": 3, "targets": {"s/car": 1.0}, "predicate": "is_carr", "confidence": 0.7, "context": "vlm", "geometric": {}})
+    (tmp_path / "unknown").mkdir()
+    ev2, _ = _write_stream(tmp_path / "unknown", bad)
+    assert main(["replay", str(ev2), "--truth", str(truth), "--vocab", "kitti360", "--no-progress", "--engine", "batched"]) == 1
+    err = capsys.readouterr().err
+    assert ":6" in err and "is_carr" in err
+
+
+def test_which_runs_the_batched_engine_takes(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sgbelief.eval.batched as batched
+    from sgbelief.eval.formats import EventRecord
+    from sgbelief.eval.replay import _batchable, make_runs, replay
+    from sgbelief.fusion.compatibility import SubsumptionTable
+
+    runs = make_runs(["majority", "naive_bayes", "overwrite", "refined", "cal", "comod"], SubsumptionTable.shipped("kitti360"))
+    assert [_batchable(r) for r in runs] == [True, True, True, False, False, False]
+    seen = []
+    real = batched.batched_replay
+    monkeypatch.setattr(batched, "batched_replay", lambda cols, name, *a, **k: seen.append(name) or real(cols, name, *a, **k))
+    recs = [EventRecord(t, {"v": 1.0}, "is_car", 0.8, "vlm", {"v": "car"}) for t in range(30)]
+    replay(recs, runs, engine="batched")
+    assert seen == ["majority", "naive_bayes", "overwrite"]
+    assert all(r.events == 30 for r in runs) and runs[0].operator.stats["committed"] == 30
+    assert not _batchable(runs[0])  # its graph is no longer empty

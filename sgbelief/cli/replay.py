@@ -26,6 +26,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tau", type=float, default=0.5, help="commit threshold for the metrics")
     p.add_argument("--allow-unknown-predicates", action="store_true", help="accept predicates the vocabulary does not define")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--engine", choices=["streaming", "batched", "auto"], default="streaming",
+                   help="streaming (event by event, the log read incrementally), batched (majority, naive_bayes and "
+                        "overwrite through the vectorised engine: same maps bit for bit, ~20x faster, the log held in "
+                        "memory, times must not decrease; other operators stream) or auto (batched when possible)")
     p.add_argument("--workers", type=int, default=1, help="replay several scenes in parallel processes")
     p.add_argument("--executor", choices=["local", "ray"], default="local",
                    help="local process pool, or a Ray cluster (pip install 'sgbelief[ray]'; RAY_ADDRESS)")
@@ -58,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         progress = tqdm(desc="replay", unit="ev", file=sys.stderr)
     try:
         replay(iter_events(args.events, skip_bad_lines=args.skip_bad_lines, stats=stats), runs,
-               line_of=stats, source=args.events, progress=progress)
+               line_of=stats, source=args.events, progress=progress, engine=args.engine)
     finally:
         if progress is not None:
             progress.close()
@@ -90,7 +94,8 @@ def _run_scenes(args: argparse.Namespace, names: list[str], truth, vocab, config
     from sgbelief.graph.persistence import atomic_write_text
 
     jobs = [SceneJob(str(e), tuple(names), str(args.vocab), config.model_dump(), not args.allow_unknown_predicates,
-                     args.skip_bad_lines, str(args.save_graph) if args.save_graph else None, args.graph_format)
+                     args.skip_bad_lines, str(args.save_graph) if args.save_graph else None, args.graph_format,
+                     args.engine)
             for e in args.events]
     results = run_scenes(replay_scene, jobs, workers=args.workers, executor=args.executor)
     preds = _predicates(vocab, truth)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sgbelief.errors import FormatError, SgbeliefError
+from sgbelief.errors import FormatError, SgbeliefError, UnknownPredicateError
 from sgbelief.eval.formats import EventRecord, ReadStats, iter_events
 from sgbelief.eval.metrics import SetScores, brier_over_pairs, mean_iou, per_predicate_scores
 from sgbelief.fusion.channel import FrameLabels
@@ -94,6 +94,23 @@ def make_runs(
     return runs
 
 
+ENGINES = ("streaming", "batched", "auto")
+
+
+def _batchable(run: OperatorRun) -> bool:
+    """A shipped count-based baseline on a fresh graph: the batched engine gives its exact result."""
+    from sgbelief.eval.batched import BATCHED_OPERATORS
+    from sgbelief.fusion.operators.baselines import MajorityVoteOperator, NaiveBayesOperator, OverwriteOperator
+
+    g = run.graph
+    return (
+        type(run.operator) in (MajorityVoteOperator, NaiveBayesOperator, OverwriteOperator)
+        and run.operator.name in BATCHED_OPERATORS
+        and run.events == 0
+        and not len(g.nx) and not len(g.provenance) and g.clock == -1 and not g.meta
+    )
+
+
 def replay(
     records: Iterable[EventRecord],
     runs: Sequence[OperatorRun],
@@ -101,15 +118,65 @@ def replay(
     line_of: ReadStats | None = None,
     source: object = None,
     progress: Any = None,
+    engine: str = "streaming",
 ) -> list[OperatorRun]:
-    """Apply every record to every run; errors name the line (from ``line_of.lines``) when known."""
+    """Apply every record to every run; errors name the line (from ``line_of.lines``) when known.
+
+    ``engine``: ``streaming`` (event by event, records read incrementally), ``batched`` (the
+    majority / naive_bayes / overwrite runs go through :func:`sgbelief.eval.batched.batched_replay`,
+    bit-identical and ~20x faster; the other runs stream; records are held in memory; event times
+    must not decrease) or ``auto`` (batched when the stream allows it, streaming otherwise).
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    waves = [r for r in runs if engine != "streaming" and _batchable(r)]
+    if not waves:
+        return _stream(records, runs, line_of, source, progress)
+    recs: list[EventRecord] = []
+    lines: list[int] = []
+    for rec in records:
+        recs.append(rec)
+        lines.append(line_of.lines if line_of is not None else len(recs))
+    back = next((i for i in range(1, len(recs)) if recs[i].t < recs[i - 1].t), None)
+    if back is not None:
+        if engine == "batched":
+            raise FormatError(f"the batched engine needs non-decreasing event times; t goes back from "
+                              f"{recs[back - 1].t} to {recs[back].t} (use --engine streaming)", path=source, line=lines[back])
+        waves = []
+    others = [r for r in runs if r not in waves]
+    if others:
+        _stream(recs, others, _Lines(lines), source, None)
+    if waves:
+        _waves(recs, lines, waves, source)
+    if progress is not None:
+        progress.update(len(recs))
+    return runs
+
+
+class _Lines:
+    """Line numbers of already-read records, served in order as ``ReadStats.lines`` would be."""
+
+    def __init__(self, lines: list[int]) -> None:
+        self._it = iter(lines)
+        self.lines = 0
+
+    def advance(self) -> None:
+        self.lines = next(self._it)
+
+
+def _stream(records: Iterable[EventRecord], runs: Sequence[OperatorRun], line_of: Any, source: object,
+            progress: Any) -> list[OperatorRun]:
+    """The streaming engine: every record to every run, event by event."""
     perf = time.perf_counter
     n = 0
+    advance = line_of.advance if isinstance(line_of, _Lines) else None
     # the shipped operators can skip building per-target reports (replay discards them)
     quiet = [isinstance(run.operator, BaseOperator) for run in runs]
     with relaxed_gc():
         for rec in records:
             n += 1
+            if advance is not None:
+                advance()
             ev, labels = to_event(rec, f"line{line_of.lines if line_of is not None else n}")
             for run, q in zip(runs, quiet):
                 t0 = perf()
@@ -126,6 +193,29 @@ def replay(
             if progress is not None:
                 progress.update(1)
     return runs
+
+
+def _waves(recs: list[EventRecord], lines: list[int], runs: Sequence[OperatorRun], source: object) -> None:
+    """The batched engine for the count-based baselines; each run's time includes columnarisation."""
+    from sgbelief.eval.batched import EventColumns, batched_replay
+
+    if any(r.graph.vocabulary is not None for r in runs):
+        for rec, line in zip(recs, lines):
+            for r in runs:
+                if r.graph.vocabulary is not None and rec.predicate not in r.graph.vocabulary:
+                    exc = UnknownPredicateError(rec.predicate, r.graph.vocabulary)
+                    raise FormatError(f"event {rec.id or f'line{line}'!r} rejected by {r.name}: {exc}",
+                                      path=source, line=line)
+    t0 = time.perf_counter()
+    named = [rec if rec.id is not None else rec._replace(id=f"line{line}") for rec, line in zip(recs, lines)]
+    cols = EventColumns.from_records(named)
+    t_cols = time.perf_counter() - t0
+    for run in runs:
+        t0 = time.perf_counter()
+        _, stats = batched_replay(cols, run.operator.name, None, run.operator.config, graph=run.graph)
+        run.seconds += t_cols + time.perf_counter() - t0
+        run.events += len(recs)
+        run.operator.stats.update(stats)
 
 
 def replay_file(
@@ -205,6 +295,7 @@ class SceneJob:
     skip_bad_lines: bool = False
     save_graph: str | None = None
     graph_format: str = "json"
+    engine: str = "streaming"
 
 
 @dataclass
@@ -226,7 +317,8 @@ def replay_scene(job: SceneJob) -> SceneResult:
     config = OperatorConfig.from_mapping(job.config) if job.config is not None else OperatorConfig.default()
     stats = ReadStats()
     runs = make_runs(list(job.operators), vocab, config, strict=job.strict)
-    replay(iter_events(job.events, skip_bad_lines=job.skip_bad_lines, stats=stats), runs, line_of=stats, source=job.events)
+    replay(iter_events(job.events, skip_bad_lines=job.skip_bad_lines, stats=stats), runs, line_of=stats, source=job.events,
+           engine=job.engine)
     probs: dict[str, dict[str, dict[str, float]]] = {}
     pairs: dict[str, list[tuple[str, str]]] = {}
     for r in runs:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import stat
 import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -143,6 +144,13 @@ def atomic_write_text(path: str | Path, text: str | Iterable[str]) -> None:
     atomic_write_binary(path, write)
 
 
+def _umask() -> int:
+    """The process umask (read by setting and restoring it)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write_binary(path: str | Path, write: Callable[[BinaryIO], None]) -> None:
     """Call ``write(fh)`` on a temp file in the same directory, fsync, rename over ``path``.
     Readers never see a partial file; on error the old file is left untouched."""
@@ -150,6 +158,12 @@ def atomic_write_binary(path: str | Path, write: Callable[[BinaryIO], None]) -> 
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        # mkstemp creates the file 0600; give it the mode a plain open() would (or the old file's)
+        try:
+            mode = stat.S_IMODE(os.stat(path).st_mode)
+        except FileNotFoundError:
+            mode = 0o666 & ~_umask()
+        os.chmod(fd, mode)
         with os.fdopen(fd, "wb") as fh:
             write(fh)
             fh.flush()
