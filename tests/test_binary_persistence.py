@@ -472,3 +472,76 @@ def test_layout_arrays_and_header(saved: tuple[SceneGraph, Path]) -> None:
     assert cols["nul"]["kind"] == "str"  # a NUL inside: this column carries explicit lengths
     j = list(cols).index("nul")
     assert f"node_attr.{j}.lengths" in arrays and "node_id.lengths" not in arrays
+
+
+# ------------------------------------------------- large columns (chunked passes, shared values)
+def _big_graph(n: int) -> SceneGraph:
+    """More rows than one save chunk; constant, few-valued and signed-zero columns; mixed log lengths."""
+    g = SceneGraph()
+    for i in range(n):
+        g.add_node(f"n{i}", bbox=((float(i), -0.0, 0.0), (i + 0.5, 1.0, 2.0)), floor_z=-0.0 if i % 7 else 0.0,
+                   w=1.5, k=3, scene=f"s{i // 100}")
+    prov = g.provenance
+    for i in range(n):
+        prov.record(f"n{i}", "is_car", f"e{i}", i // 10, 1.0 if i % 3 else 0.0, 0.0 if i % 3 else 1.0)
+        if i % 5 == 0:  # some pairs with two entries, some events on two pairs
+            prov.record(f"n{i}", "is_car", f"x{i}", i // 10, 0.5, 0.25)
+            prov.record(f"n{(i + 1) % n}", "is_chair", f"x{i}", i // 10, -0.0, 1.0)
+    prov.compact(n // 20)
+    return g
+
+
+def test_large_graph_round_trip_is_bit_exact(tmp_path: Path) -> None:
+    from sgbelief.graph.binary import _CHUNK
+
+    n = _CHUNK + 1500
+    g = _big_graph(n)
+    h = SceneGraph.load(g.save(tmp_path / "big.npz"))
+    assert _signature(h) == _signature(g)
+    bits = lambda x: math.copysign(1.0, x)  # noqa: E731 - tells -0.0 from 0.0
+    for node in ("n0", "n1", "n7", f"n{n - 1}"):
+        a, b = g.node_attrs(node), h.node_attrs(node)
+        assert a == b and bits(a["floor_z"]) == bits(b["floor_z"]) and type(b["k"]) is int
+        assert [bits(x) for c in a["bbox"] for x in c] == [bits(x) for c in b["bbox"] for x in c]
+        assert type(b["bbox"]) is tuple and type(b["bbox"][0]) is tuple
+    for key, log in g.provenance._pairs.items():
+        other = h.provenance._pairs[key]
+        assert (log.alpha, log.beta) == (other.alpha, other.beta)
+        assert [bits(e.d_alpha) for e in log.entries] == [bits(e.d_alpha) for e in other.entries]
+    last = (n - 1) // 5 * 5  # an event on two pairs that compaction kept
+    assert len(h.provenance.event_entries(f"x{last}")) == len(g.provenance.event_entries(f"x{last}")) == 2
+    # a constant column is loaded as one shared float, equal values of a few-valued column share objects
+    assert len({id(h.node_attrs(f"n{i}")["w"]) for i in range(n)}) == 1
+    assert len({id(h.node_attrs(f"n{i}")["floor_z"]) for i in range(n)}) == 2
+
+
+def test_irregular_row_in_a_later_chunk(tmp_path: Path) -> None:
+    from sgbelief.graph.binary import _CHUNK
+
+    g = SceneGraph()
+    for i in range(_CHUNK + 10):
+        g.add_node(i, centroid=(float(i), 0.0, 1.0), vec=(1.0, float(i)))
+    g.node_attrs(_CHUNK + 3)["vec"] = (1.0, 2.0, 3.0)  # another shape, past the first chunk
+    del g.node_attrs(_CHUNK + 5)["centroid"]  # another key set, past the first chunk
+    arrays = graph_to_arrays(g)
+    cols = {c["key"]: c for c in _header(arrays)["node_attrs"]["columns"]}
+    assert cols["vec"]["kind"] == "json" and cols["centroid"]["kind"] == "float"
+    h = SceneGraph.load(g.save(tmp_path / "g.npz"))
+    j = SceneGraph.load(g.save(tmp_path / "g.json"))
+    assert graph_to_dict(h) == graph_to_dict(j) == graph_to_dict(g)
+    assert h.node_attrs(_CHUNK + 3) == j.node_attrs(_CHUNK + 3) and "centroid" not in h.node_attrs(_CHUNK + 5)
+
+
+def test_pylist_shares_only_bit_identical_values() -> None:
+    from sgbelief.graph.binary import _pylist
+
+    x = np.zeros(10_000)
+    x[::2] = -0.0
+    out = _pylist(x)
+    assert out == x.tolist() and [math.copysign(1, v) for v in out] == [math.copysign(1, v) for v in x.tolist()]
+    assert len({id(v) for v in out}) == 2
+    y = np.arange(10_000, dtype=np.int64) % 3
+    y[4321] = 2**40  # a value the sample misses: plain tolist
+    assert _pylist(y) == y.tolist()
+    r = np.random.default_rng(0).random(10_000)
+    assert _pylist(r) == r.tolist()

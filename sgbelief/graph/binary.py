@@ -64,6 +64,8 @@ _B1 = np.dtype("|b1")
 _SPECIAL_DEPTH = {"centroid": 1, "bbox": 2}
 _FLOAT_TYPES = frozenset({float, np.float64})
 _SEP = "\x00"
+#: rows per pass when walking millions of Python objects: the later passes over a chunk hit the cache
+_CHUNK = 8192
 
 __all__ = ["FORMAT", "VERSION", "save_graph_npz", "load_graph_npz", "graph_to_arrays"]
 
@@ -119,11 +121,8 @@ def _read_strings(arch: _Archive, name: str, rows: int) -> list[str]:
 # A value column holds one Python value per row. Its header spec {"kind", "shape"} says how:
 #   str  -> <name>.text / <name>.lengths         int  -> <name> <i8      bool -> <name> |b1
 #   float-> <name> <f8 of shape (rows, *shape)   json -> <name>.text / .lengths, one JSON text per row
-def _float_block(values: list[Any] | tuple[Any, ...], depth: int, exact: bool) -> tuple[list[int], np.ndarray] | None:
-    """(shape, flat float64 array) when every value is a same-shaped nest (``depth`` levels) of
-    sequences of numbers. ``exact``: tuples/lists of exactly ``float`` (other numbers must stay
-    what they are); otherwise anything that ``float()`` converts, iterated the way the JSON loader
-    iterates ``centroid`` / ``bbox`` (which load as floats either way)."""
+def _float_chunk(values: list[Any] | tuple[Any, ...], depth: int, exact: bool) -> tuple[list[int], np.ndarray] | None:
+    """:func:`_float_block` of one chunk of rows."""
     shape: list[int] = []
     level: Any = values
     for d in range(depth):
@@ -144,6 +143,28 @@ def _float_block(values: list[Any] | tuple[Any, ...], depth: int, exact: bool) -
         flat = np.fromiter(chain.from_iterable(level), _F8, len(values) * math.prod(shape))
     except (TypeError, ValueError, OverflowError):
         return None
+    return shape, flat
+
+
+def _float_block(values: list[Any] | tuple[Any, ...], depth: int, exact: bool) -> tuple[list[int], np.ndarray] | None:
+    """(shape, flat float64 array) when every value is a same-shaped nest (``depth`` levels) of
+    sequences of numbers. ``exact``: tuples/lists of exactly ``float`` (other numbers must stay
+    what they are); otherwise anything that ``float()`` converts, iterated the way the JSON loader
+    iterates ``centroid`` / ``bbox`` (which load as floats either way). Works in chunks of rows,
+    so the several passes over a chunk's objects hit the cache."""
+    n = len(values)
+    first = _float_chunk(values[:_CHUNK], depth, exact)
+    if first is None or n <= _CHUNK:
+        return first
+    shape, head = first
+    width = math.prod(shape)
+    flat = np.empty(n * width, dtype=_F8)
+    flat[:len(head)] = head
+    for a in range(_CHUNK, n, _CHUNK):
+        got = _float_chunk(values[a:a + _CHUNK], depth, exact)
+        if got is None or got[0] != shape:
+            return None
+        flat[a * width:a * width + len(got[1])] = got[1]
     return shape, flat
 
 
@@ -193,6 +214,37 @@ def _json_constant(name: str) -> Any:
     raise ValueError(f"non-finite number {name} is not allowed")
 
 
+_SAMPLE = 1024  #: rows sampled to guess whether a numeric column has few distinct values
+_FEW = 64  #: at most this many distinct values in the sample: try sharing Python objects
+
+
+def _pylist(arr: np.ndarray) -> list[Any]:
+    """``arr.tolist()`` of a 1-d int64 / float64 array, except that when the column holds only a few
+    distinct values (a constant, unit weights, flags) equal values share one Python object: far
+    fewer allocations, same values. Values are compared bit for bit (``-0.0`` stays ``-0.0``)."""
+    n = len(arr)
+    if n < 4 * _SAMPLE or arr.dtype not in (_F8, _I8):
+        return arr.tolist()
+    bits = arr.view(_I8)
+    table = np.unique(bits[np.arange(_SAMPLE, dtype=np.uint64) * np.uint64(2654435761) % np.uint64(n)])
+    if len(table) > _FEW:
+        return arr.tolist()
+    pos = np.searchsorted(table, bits)
+    np.minimum(pos, len(table) - 1, out=pos)
+    if not np.array_equal(table[pos], bits):  # a value the sample missed: no sharing
+        return arr.tolist()
+    objs = np.fromiter(table.view(arr.dtype).tolist(), object, len(table))
+    return objs[pos].tolist()
+
+
+def _float_tuples(arr: np.ndarray) -> list[Any]:
+    """Rows of a (rows, *shape) float array as nested tuples (what the JSON loader makes of
+    ``centroid`` / ``bbox``), built column by column so that constant components share one float."""
+    if arr.ndim == 1:
+        return _pylist(arr)
+    return list(zip(*(_float_tuples(arr[:, i]) for i in range(arr.shape[1]))))
+
+
 def _decode_values(arch: _Archive, name: str, spec: dict[str, Any], rows: int, special: str | None = None
                    ) -> list[Any]:
     """Read a value column back as Python values of the types a JSON round trip gives."""
@@ -215,14 +267,11 @@ def _decode_values(arch: _Archive, name: str, spec: dict[str, Any], rows: int, s
             raise arch.error(f"array '{name}': non-finite value at row {int(np.flatnonzero(~finite)[0])}")
         shape = list(arr.shape[1:])
         if special is not None and len(shape) == _SPECIAL_DEPTH[special] and 0 not in shape:
-            # tuples straight from the flat float list (zip over one iterator groups it)
-            it: Iterator[Any] = iter(arr.ravel().tolist())
-            for width in reversed(shape):
-                it = zip(*[it] * width)
-            return list(it)
-        values = arr.tolist()
+            return _float_tuples(arr)
+        values = _pylist(arr) if not shape else arr.tolist()
     else:
-        values = arch.read(name, *_value_array(spec, rows)).tolist()
+        arr = arch.read(name, *_value_array(spec, rows))
+        values = _pylist(arr) if kind == "int" else arr.tolist()
     if special is not None:
         try:
             values = [restore_node_attr(special, v) for v in values]
@@ -244,8 +293,15 @@ def _encode_records(dicts: list[dict[str, Any]], prefix: str, what: Callable[[in
     uniform = False
     if n:  # one key set (the usual case): one list per key, no per-row pattern bookkeeping
         try:
-            columns = [[d[k] for d in dicts] for k in keys]
-            uniform = set(map(len, dicts)) == {len(keys)}
+            getters = [itemgetter(k) for k in keys]
+            columns = [[] for _ in keys]
+            lens: set[int] = set()
+            for a in range(0, n, _CHUNK):  # chunk by chunk: the dicts stay in cache across the keys
+                chunk = dicts[a:a + _CHUNK]
+                lens.update(map(len, chunk))
+                for col, get in zip(columns, getters):
+                    col += map(get, chunk)
+            uniform = lens == {len(keys)}
         except KeyError:
             pass
     if uniform:
@@ -501,45 +557,63 @@ def graph_to_arrays(graph: SceneGraph) -> dict[str, np.ndarray]:
         if not isinstance(p, str) or not p:
             raise ValueError(f"provenance predicate {p!r} must be a non-empty string")
     arrays["pair_predicate"] = pred_code.astype(_I4)
-    arrays["pair_alpha"] = np.fromiter(map(attrgetter("alpha"), logs), _F8, n_pairs)
-    arrays["pair_beta"] = np.fromiter(map(attrgetter("beta"), logs), _F8, n_pairs)
-    entry_lists = list(map(attrgetter("entries"), logs))
-    arrays["pair_length"] = lengths = np.fromiter(map(len, entry_lists), _I8, n_pairs)
+    alpha, beta, lengths = np.empty(n_pairs, _F8), np.empty(n_pairs, _F8), np.empty(n_pairs, _I8)
+    flat: list[ProvenanceEntry] = []  # every entry, grouped by pair in log order
+    for a in range(0, n_pairs, _CHUNK):
+        chunk = logs[a:a + _CHUNK]
+        b = a + len(chunk)
+        alpha[a:b] = np.fromiter(map(attrgetter("alpha"), chunk), _F8, b - a)
+        beta[a:b] = np.fromiter(map(attrgetter("beta"), chunk), _F8, b - a)
+        entry_lists = list(map(attrgetter("entries"), chunk))
+        lengths[a:b] = np.fromiter(map(len, entry_lists), _I8, b - a)
+        flat += chain.from_iterable(entry_lists)
+    arrays["pair_alpha"], arrays["pair_beta"], arrays["pair_length"] = alpha, beta, lengths
     bad = ~(np.isfinite(arrays["pair_alpha"]) & np.isfinite(arrays["pair_beta"]))
     if bad.any():
         raise ValueError(f"belief of {keys[int(np.flatnonzero(bad)[0])]!r} is not finite")
-    # ---- entries (flat, grouped by pair in log order), one pass over the entry objects
-    flat: list[ProvenanceEntry] = list(chain.from_iterable(entry_lists))
+    # ---- entries, in the order of ``flat``
     m = len(flat)
     pair_of = lambda i: keys[int(np.searchsorted(np.cumsum(lengths), i, side="right"))]  # noqa: E731
-    try:
-        arrays["entry_t"] = np.fromiter(map(attrgetter("t"), flat), _I8, m)
-        arrays["entry_stance"] = np.fromiter(map(attrgetter("stance"), flat), _I1, m)
-        arrays["entry_n_folded"] = np.fromiter(map(attrgetter("n_folded"), flat), _I8, m)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise ValueError(f"provenance entry t / n_folded must be 64-bit integers and stance in [-128, 127] ({exc})"
-                         ) from None
-    da = arrays["entry_d_alpha"] = np.fromiter(map(attrgetter("d_alpha"), flat), _F8, m)
-    db = arrays["entry_d_beta"] = np.fromiter(map(attrgetter("d_beta"), flat), _F8, m)
+    # chunk by chunk, so that the eight attribute passes over a chunk's entries hit the cache
+    t_arr, stance, n_folded = np.empty(m, _I8), np.empty(m, _I1), np.empty(m, _I8)
+    da, db = np.empty(m, _F8), np.empty(m, _F8)
+    status_c: list[Any] = []
+    eid_c: list[Any] = []
+    corr_c: list[Any] = []
+    get = attrgetter("t"), attrgetter("stance"), attrgetter("n_folded"), attrgetter("d_alpha"), attrgetter("d_beta")
+    for a in range(0, m, _CHUNK):
+        chunk = flat[a:a + _CHUNK]
+        b, k = a + len(chunk), len(chunk)
+        try:
+            t_arr[a:b] = np.fromiter(map(get[0], chunk), _I8, k)
+            stance[a:b] = np.fromiter(map(get[1], chunk), _I1, k)
+            n_folded[a:b] = np.fromiter(map(get[2], chunk), _I8, k)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise ValueError(f"provenance entry t / n_folded must be 64-bit integers and stance in [-128, 127] "
+                             f"({exc})") from None
+        da[a:b] = np.fromiter(map(get[3], chunk), _F8, k)
+        db[a:b] = np.fromiter(map(get[4], chunk), _F8, k)
+        status_c += map(attrgetter("status"), chunk)
+        eid_c += map(attrgetter("event_id"), chunk)
+        corr_c += map(attrgetter("corroborated_by"), chunk)
+    arrays["entry_t"], arrays["entry_stance"], arrays["entry_n_folded"] = t_arr, stance, n_folded
+    arrays["entry_d_alpha"], arrays["entry_d_beta"] = da, db
     bad = ~(np.isfinite(da) & np.isfinite(db))
     if bad.any():
         raise ValueError(f"provenance entry of {pair_of(int(np.flatnonzero(bad)[0]))!r}: increments must be finite")
     statuses = list(EntryStatus)
     status_code = {id(s): i for i, s in enumerate(statuses)}
-    status_c = list(map(attrgetter("status"), flat))
     try:
         status = np.fromiter(map(status_code.__getitem__, map(id, status_c)), _U1, m)
     except KeyError:
         i = next(i for i, s in enumerate(status_c) if id(s) not in status_code)
         raise ValueError(f"provenance entry of {pair_of(i)!r}: status {status_c[i]!r} is not an EntryStatus") from None
     arrays["entry_status"] = status
-    eid_c = list(map(attrgetter("event_id"), flat))
     null = np.fromiter(map(is_, eid_c, repeat(None)), _B1, m)
     arrays["entry_event_null"] = null
     eids = ["" if e is None else e for e in eid_c] if null.any() else eid_c
     arrays.update({f"entry_event{s}": a
                    for s, a in _encode_strings(eids, lambda i: f"event id of the entry of {pair_of(i)!r}").items()})
-    corr_c = list(map(attrgetter("corroborated_by"), flat))
     cidx = np.flatnonzero(np.fromiter(map(is_not, corr_c, repeat(None)), _B1, m)).astype(_I8)
     clists = [list(corr_c[i]) for i in cidx.tolist()]
     arrays["corroborated_entry"] = cidx
@@ -902,6 +976,13 @@ def _add_nodes(g: nx.MultiDiGraph, ids: list[Any], attrs: list[dict[str, Any]]) 
         clear(g)
 
 
+def _split(entries: list[Any], offsets: np.ndarray, lengths: np.ndarray) -> Iterable[list[Any]]:
+    """The per-pair entry lists (consecutive runs of ``entries``), in pair order."""
+    if len(lengths) and int(lengths.min()) == 1 and int(lengths.max()) == 1:
+        return map(list, zip(entries))  # one entry per pair (zip reuses its 1-tuple)
+    return map(entries.__getitem__, map(slice, offsets[:-1].tolist(), offsets[1:].tolist()))
+
+
 def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[Any, str]],
                  pair_nodes: np.ndarray, pair_preds: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
                  lengths: np.ndarray,
@@ -911,44 +992,50 @@ def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[
                  queues: dict[str, np.ndarray], compacted: list[str]) -> ProvenanceStore:
     """The ProvenanceStore with every index the streaming store keeps, from validated columns."""
     store = ProvenanceStore((h.prior[0], h.prior[1]), remember_compacted=h.remember_compacted)
+    m = len(t)
     status_arr = np.empty(len(statuses), dtype=object)
     for i, s in enumerate(statuses):
         status_arr[i] = s
-    for i in np.flatnonzero(null).tolist():
-        eids[i] = None
-    entries = list(map(ProvenanceEntry, eids, t.tolist(), da.tolist(), db.tolist(),
+    eid_arr = np.fromiter(eids, object, m)
+    if null.any():
+        eid_arr[null] = None
+    entries = list(map(ProvenanceEntry, eid_arr.tolist(), _pylist(t), _pylist(da), _pylist(db),
                        status_arr[status].tolist(), np.repeat(pair_nodes, lengths).tolist(),
                        np.repeat(pair_preds, lengths).tolist(), stance.tolist()))
+    entry_arr = np.fromiter(entries, object, m)
     folded = np.flatnonzero(n_folded != 1)
     set_folded = ProvenanceEntry.n_folded.__set__  # type: ignore[attr-defined]
-    deque(map(set_folded, map(entries.__getitem__, folded.tolist()), n_folded[folded].tolist()), maxlen=0)
+    deque(map(set_folded, entry_arr[folded].tolist(), n_folded[folded].tolist()), maxlen=0)
     if len(corr_entry):
         bounds = np.zeros(len(corr_len) + 1, dtype=_I8)
         np.cumsum(corr_len, out=bounds[1:])
         for i, a, b in zip(corr_entry.tolist(), bounds[:-1].tolist(), bounds[1:].tolist()):
             entries[i].corroborated_by = corr_ids[a:b]
-    logs = list(map(_PairLog, alpha.tolist(), beta.tolist()))
+    logs = list(map(_PairLog, _pylist(alpha), _pylist(beta)))
     set_entries = _PairLog.entries.__set__  # type: ignore[attr-defined]
-    deque(map(set_entries, logs, map(entries.__getitem__, map(slice, offsets[:-1].tolist(), offsets[1:].tolist()))),
-          maxlen=0)
+    deque(map(set_entries, logs, _split(entries, offsets, lengths)), maxlen=0)
     store._pairs = dict(zip(pair_keys, logs))
-    by_event = store._by_event
-    for eid, e in zip(eids, entries):
-        if eid is None:
-            continue
-        bucket = by_event.get(eid)
-        if bucket is None:
-            by_event[eid] = [e]
-        else:
-            bucket.append(e)
-    store._timeline = deque(map(entries.__getitem__, timeline.tolist()))
-    store.quarantine = deque(map(entries.__getitem__, queues["quarantine"].tolist()))
-    store.disagreement = deque(map(entries.__getitem__, queues["disagreement"].tolist()))
+    # event index: each event's entries in log order
+    named = np.flatnonzero(~null)
+    ev = eid_arr[named].tolist()
+    ents = entry_arr[named].tolist()
+    by_event = dict(zip(ev, map(list, zip(ents))))
+    if len(by_event) != len(ev):  # some event has several entries
+        by_event = {}
+        for eid, e in zip(ev, ents):
+            bucket = by_event.get(eid)
+            if bucket is None:
+                by_event[eid] = [e]
+            else:
+                bucket.append(e)
+    store._by_event = by_event
+    store._timeline = deque(entry_arr[timeline].tolist())
+    store.quarantine = deque(entry_arr[queues["quarantine"]].tolist())
+    store.disagreement = deque(entry_arr[queues["disagreement"]].tolist())
     # per-pair pending lists in time order (stable), as the JSON loader builds them
     pending = np.flatnonzero(np.isin(status, [i for i, s in enumerate(statuses) if s in PENDING]))
     by_pair = store._pending_by_pair
-    for i in pending[np.argsort(t[pending], kind="stable")].tolist():
-        e = entries[i]
+    for e in entry_arr[pending[np.argsort(t[pending], kind="stable")]].tolist():
         by_pair.setdefault((e.node, e.predicate), []).append(e)
     store._compacted_order.extend(compacted)  # bounded by remember_compacted: keeps the newest
     store.n_compacted = h.n_compacted
