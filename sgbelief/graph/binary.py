@@ -1002,10 +1002,10 @@ def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[
     entries = list(map(ProvenanceEntry, eid_arr.tolist(), _pylist(t), _pylist(da), _pylist(db),
                        status_arr[status].tolist(), np.repeat(pair_nodes, lengths).tolist(),
                        np.repeat(pair_preds, lengths).tolist(), stance.tolist()))
-    entry_arr = np.fromiter(entries, object, m)
+    pick = entries.__getitem__
     folded = np.flatnonzero(n_folded != 1)
     set_folded = ProvenanceEntry.n_folded.__set__  # type: ignore[attr-defined]
-    deque(map(set_folded, entry_arr[folded].tolist(), n_folded[folded].tolist()), maxlen=0)
+    deque(map(set_folded, map(pick, folded.tolist()), n_folded[folded].tolist()), maxlen=0)
     if len(corr_entry):
         bounds = np.zeros(len(corr_len) + 1, dtype=_I8)
         np.cumsum(corr_len, out=bounds[1:])
@@ -1018,7 +1018,7 @@ def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[
     # event index: each event's entries in log order
     named = np.flatnonzero(~null)
     ev = eid_arr[named].tolist()
-    ents = entry_arr[named].tolist()
+    ents = list(map(pick, named.tolist()))
     by_event = dict(zip(ev, map(list, zip(ents))))
     if len(by_event) != len(ev):  # some event has several entries
         by_event = {}
@@ -1029,13 +1029,13 @@ def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[
             else:
                 bucket.append(e)
     store._by_event = by_event
-    store._timeline = deque(entry_arr[timeline].tolist())
-    store.quarantine = deque(entry_arr[queues["quarantine"]].tolist())
-    store.disagreement = deque(entry_arr[queues["disagreement"]].tolist())
+    store._timeline = deque(map(pick, timeline.tolist()))
+    store.quarantine = deque(map(pick, queues["quarantine"].tolist()))
+    store.disagreement = deque(map(pick, queues["disagreement"].tolist()))
     # per-pair pending lists in time order (stable), as the JSON loader builds them
     pending = np.flatnonzero(np.isin(status, [i for i, s in enumerate(statuses) if s in PENDING]))
     by_pair = store._pending_by_pair
-    for e in entry_arr[pending[np.argsort(t[pending], kind="stable")]].tolist():
+    for e in map(pick, pending[np.argsort(t[pending], kind="stable")].tolist()):
         by_pair.setdefault((e.node, e.predicate), []).append(e)
     store._compacted_order.extend(compacted)  # bounded by remember_compacted: keeps the newest
     store.n_compacted = h.n_compacted
