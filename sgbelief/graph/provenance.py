@@ -400,86 +400,92 @@ class ProvenanceStore:
         entry arrived (deterministic: the compacted-id memory fills in that order). Returns the
         number of entries folded.
         """
-        dirty: dict[PairKey, None] = {}
         timeline = self._timeline
-        popleft = timeline.popleft
-        while timeline and timeline[0].t < before_t:
-            entry = popleft()
-            if entry.alive:
-                dirty[(entry.node, entry.predicate)] = None
-        pairs = self._pairs
+        n_old = 0  # the timeline's prefix older than the horizon
+        for entry in timeline:
+            if entry.t >= before_t:
+                break
+            n_old += 1
+        if not n_old:
+            return 0
+        if n_old == len(timeline):
+            old = list(timeline)
+            timeline.clear()
+        else:
+            popleft = timeline.popleft
+            old = [popleft() for _ in range(n_old)]
+        # pairs in the order their oldest entry past the horizon arrived
+        dirty = dict.fromkeys([(e.node, e.predicate) for e in old if e.alive])
+        pairs_get = self._pairs.get
+        by_event = self._by_event
         gone: list[str] = []
         folded_total = 0
+        refused, quarantined, compacted = _REFUSED, _QUARANTINED, _COMPACTED
+        counted_ids = _COUNTED_IDS
         for key in dirty:
-            log = pairs.get(key)
-            if log is not None:
-                folded_total += self._compact_pair(log, before_t, gone)
+            log = pairs_get(key)
+            if log is None:
+                continue
+            # fold this pair's settled entries older than before_t into its compacted bucket
+            keep: list[ProvenanceEntry] = []
+            fold: list[ProvenanceEntry] = []
+            bucket: ProvenanceEntry | None = None
+            for entry in log.entries:
+                st = entry.status
+                if st is compacted:
+                    bucket = entry
+                elif entry.t < before_t and st is not refused and st is not quarantined:
+                    fold.append(entry)
+                else:
+                    keep.append(entry)
+            if not fold:
+                continue
+            first = fold[0]
+            if len(fold) == 1:  # the common case: fsum of one value is that value
+                if id(first.status) in counted_ids:
+                    d_alpha, d_beta = first.d_alpha + 0.0, first.d_beta + 0.0
+                else:
+                    d_alpha = d_beta = 0.0
+                n, t_max = first.n_folded, first.t
+            else:
+                counted = [e for e in fold if id(e.status) in counted_ids]
+                d_alpha = math.fsum([e.d_alpha for e in counted])
+                d_beta = math.fsum([e.d_beta for e in counted])
+                n = sum([e.n_folded for e in fold])
+                t_max = max([e.t for e in fold])
+            if bucket is None:
+                bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, compacted, first.node, first.predicate)
+                bucket.n_folded = n
+            else:
+                bucket.d_alpha = math.fsum((bucket.d_alpha, d_alpha))
+                bucket.d_beta = math.fsum((bucket.d_beta, d_beta))
+                bucket.n_folded += n
+                if t_max > bucket.t:
+                    bucket.t = t_max
+            for entry in fold:
+                entry.alive = False
+                eid = entry.event_id
+                if eid is not None:
+                    same_event = by_event.get(eid)
+                    if same_event is not None:
+                        if len(same_event) == 1 and same_event[0] is entry:
+                            del by_event[eid]
+                            gone.append(eid)
+                            continue
+                        try:
+                            same_event.remove(entry)
+                        except ValueError:
+                            pass
+                        if not same_event:
+                            del by_event[eid]
+                            gone.append(eid)
+            keep.insert(0, bucket)
+            log.entries = keep
+            folded_total += len(fold)
+        self.n_compacted += folded_total
         if gone:
             self._compacted_order.extend(gone)
         return folded_total
-
-    def _compact_pair(self, log: _PairLog, before_t: int, gone: list[str]) -> int:
-        """Fold one pair's settled entries older than ``before_t`` into its compacted bucket;
-        the ids of events whose last live entry is folded are appended to ``gone``."""
-        keep: list[ProvenanceEntry] = []
-        fold: list[ProvenanceEntry] = []
-        bucket: ProvenanceEntry | None = None
-        refused, quarantined = _REFUSED, _QUARANTINED
-        for entry in log.entries:
-            st = entry.status
-            if st is _COMPACTED:
-                bucket = entry
-            elif entry.t < before_t and st is not refused and st is not quarantined:
-                fold.append(entry)
-            else:
-                keep.append(entry)
-        if not fold:
-            return 0
-        if len(fold) == 1:  # the common case: fsum of one value is that value
-            first = fold[0]
-            if id(first.status) in _COUNTED_IDS:
-                d_alpha, d_beta = first.d_alpha + 0.0, first.d_beta + 0.0
-            else:
-                d_alpha = d_beta = 0.0
-            n, t_max = first.n_folded, first.t
-        else:
-            first = fold[0]
-            counted_ids = _COUNTED_IDS
-            counted = [e for e in fold if id(e.status) in counted_ids]
-            d_alpha = math.fsum([e.d_alpha for e in counted])
-            d_beta = math.fsum([e.d_beta for e in counted])
-            n = sum([e.n_folded for e in fold])
-            t_max = max([e.t for e in fold])
-        if bucket is None:
-            bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, _COMPACTED, first.node, first.predicate)
-            bucket.n_folded = n
-        else:
-            bucket.d_alpha = math.fsum((bucket.d_alpha, d_alpha))
-            bucket.d_beta = math.fsum((bucket.d_beta, d_beta))
-            bucket.n_folded += n
-            if t_max > bucket.t:
-                bucket.t = t_max
-        by_event = self._by_event
-        for entry in fold:
-            entry.alive = False
-            eid = entry.event_id
-            if eid is not None:
-                same_event = by_event.get(eid)
-                if same_event is not None:
-                    if len(same_event) == 1 and same_event[0] is entry:
-                        del by_event[eid]
-                        gone.append(eid)
-                        continue
-                    try:
-                        same_event.remove(entry)
-                    except ValueError:
-                        pass
-                    if not same_event:
-                        del by_event[eid]
-                        gone.append(eid)
-        log.entries = [bucket, *keep]
-        self.n_compacted += len(fold)
-        return len(fold)
 
     def _remember_compacted(self, event_id: str) -> None:
         self._compacted_order.append(event_id)

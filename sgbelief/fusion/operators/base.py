@@ -53,6 +53,9 @@ class BaseOperator:
             "below_tau_t": 0,
             "compacted": 0,
         }
+        cls = type(self)
+        #: the lean path may apply _split directly (the subclass did not override _increment)
+        self._linear = cls._increment is BaseOperator._increment and cls._split is not BaseOperator._split
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"
@@ -133,31 +136,55 @@ class BaseOperator:
         ``report=False`` skips building the per-target outcomes (the returned report has
         ``targets == ()``); the map, provenance and stats are the same either way.
         """
-        self._check(graph, event)
-        resolutions = self.tick(graph, event.t) if event.t > graph.clock else []
+        pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
+        vocab = graph.vocabulary
+        if vocab is not None and pred not in vocab:
+            raise UnknownPredicateError(pred, vocab)
+        resolutions = self.tick(graph, t) if t > graph.clock else []
         tau_t = self.config.tau_t
         prov = graph.provenance
         record = prov.record
         gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
-        increment = self._increment
-        pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
         if not report:
             # lean path: the verdict only feeds the report, so the channel is not consulted
             n_targets = n_below = n_committed = 0
-            for node, mass in event.targets.items():
-                n_targets += 1
-                if mass <= tau_t:
-                    n_below += 1
-                    continue
-                if node not in gnx:
-                    graph.ensure_node(node)
-                inc = increment(graph, node, pred, c, mass)
-                if inc is not None:
-                    da, db = inc
+            split = self._split(c) if self._linear else None
+            if split is not None:  # a linear rule: d_alpha = T p, d_beta = T q for every target
+                p, q = split
+                for node, mass in event.targets.items():
+                    n_targets += 1
+                    if mass <= tau_t:
+                        n_below += 1
+                        continue
+                    if node not in gnx:
+                        graph.ensure_node(node)
+                    da = mass * p
+                    db = mass * q
                     record(node, pred, eid, t, da, db, _COMMITTED, 1 if da > db else -1 if da < db else 0)
                     n_committed += 1
-            self._add_counts(n_targets, n_below, n_committed)
-            return UpdateReport(eid, t, pred, (), tuple(resolutions))
+            else:
+                increment = self._increment
+                for node, mass in event.targets.items():
+                    n_targets += 1
+                    if mass <= tau_t:
+                        n_below += 1
+                        continue
+                    if node not in gnx:
+                        graph.ensure_node(node)
+                    inc = increment(graph, node, pred, c, mass)
+                    if inc is not None:
+                        da, db = inc
+                        record(node, pred, eid, t, da, db, _COMMITTED, 1 if da > db else -1 if da < db else 0)
+                        n_committed += 1
+            stats = self.stats
+            stats["events"] += 1
+            stats["targets"] += n_targets
+            if n_below:
+                stats["below_tau_t"] += n_below
+            if n_committed:
+                stats["committed"] += n_committed
+            return UpdateReport(eid, t, pred, (), tuple(resolutions) if resolutions else ())
+        increment = self._increment
         label_of = channel.label if channel is not None else None
         verdict_of = self._verdict
         # the default verdict rule, inlined: one table lookup per target
@@ -196,7 +223,16 @@ class BaseOperator:
         return UpdateReport(eid, t, pred, tuple(outcomes), tuple(resolutions))
 
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float] | None:
-        raise NotImplementedError
+        """The increments (d_alpha, d_beta) of one target, or None when the rule ignores the claim."""
+        split = self._split(c)
+        if split is None:
+            raise NotImplementedError(f"{type(self).__name__} defines neither _increment nor _split")
+        return mass * split[0], mass * split[1]
+
+    def _split(self, c: float) -> tuple[float, float] | None:
+        """(p, q) when the rule is linear in the targeting mass (d_alpha = T p, d_beta = T q for
+        every target, whatever the belief), else None. Computed once per event on the lean path."""
+        return None
 
     # ------------------------------------------------------------ reading
     def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float:

@@ -44,8 +44,8 @@ class MajorityVoteOperator(BaseOperator):
 
     name = "majority"
 
-    def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
-        return mass * c, mass * (1.0 - c)
+    def _split(self, c: float) -> tuple[float, float]:
+        return c, 1.0 - c
 
 
 class NaiveBayesOperator(BaseOperator):
@@ -63,10 +63,10 @@ class NaiveBayesOperator(BaseOperator):
         super().__init__(*args, **kwargs)
         self._reliability = self.config.baselines.naive_bayes.reliability
 
-    def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
+    def _split(self, c: float) -> tuple[float, float]:
         r = self._reliability
         p = r * c + (1.0 - r) * (1.0 - c)
-        return mass * p, mass * (1.0 - p)
+        return p, 1.0 - p
 
 
 class RefinedOperator(BaseOperator):
