@@ -422,6 +422,7 @@ class ProvenanceStore:
         folded_total = 0
         refused, quarantined, compacted = _REFUSED, _QUARANTINED, _COMPACTED
         counted_ids = _COUNTED_IDS
+        fsum = math.fsum
         for key in dirty:
             log = pairs_get(key)
             if log is None:
@@ -447,18 +448,27 @@ class ProvenanceStore:
                 else:
                     d_alpha = d_beta = 0.0
                 n, t_max = first.n_folded, first.t
-            else:
-                counted = [e for e in fold if id(e.status) in counted_ids]
-                d_alpha = math.fsum([e.d_alpha for e in counted])
-                d_beta = math.fsum([e.d_beta for e in counted])
-                n = sum([e.n_folded for e in fold])
-                t_max = max([e.t for e in fold])
+            else:  # one loop, not four comprehensions (each costs a function call in CPython 3.11)
+                das: list[float] = []
+                dbs: list[float] = []
+                n = 0
+                t_max = first.t
+                for e in fold:
+                    if id(e.status) in counted_ids:
+                        das.append(e.d_alpha)
+                        dbs.append(e.d_beta)
+                    n += e.n_folded
+                    if e.t > t_max:
+                        t_max = e.t
+                d_alpha = fsum(das)
+                d_beta = fsum(dbs)
             if bucket is None:
                 bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, compacted, first.node, first.predicate)
                 bucket.n_folded = n
             else:
-                bucket.d_alpha = math.fsum((bucket.d_alpha, d_alpha))
-                bucket.d_beta = math.fsum((bucket.d_beta, d_beta))
+                # = fsum((bucket, d)): one IEEE addition is correctly rounded (neither is -0.0)
+                bucket.d_alpha += d_alpha
+                bucket.d_beta += d_beta
                 bucket.n_folded += n
                 if t_max > bucket.t:
                     bucket.t = t_max
