@@ -68,3 +68,27 @@ def test_revision_test_decision_equals_the_exact_kl(a: float, b: float, da: floa
     exact = betaln(a + da, b + db) - betaln(a, b) - da * digamma(a) - db * digamma(b) + (da + db) * digamma(a + b)
     assert revision_kl_exceeds(a, b, da, db, tau) == (exact > tau)
     assert abs(_digamma_estimate(a) - digamma(a)) < 1e-10 * max(1.0, abs(digamma(a)))
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.floats(1e-3, 1e5), st.floats(1e-3, 1e5), st.floats(0.0, 10.0), st.floats(0.0, 10.0))
+def test_kl_upper_bound_bounds_the_exact_kl(a: float, b: float, da: float, db: float) -> None:
+    """The bound that lets the revision test skip the special functions is >= the exact KL
+    (up to the exact formula's own rounding error)."""
+    from scipy.special import betaln, digamma
+
+    from sgbelief.fusion.operators.calibrated import kl_upper_bound
+
+    exact = betaln(a + da, b + db) - betaln(a, b) - da * digamma(a) - db * digamma(b) + (da + db) * digamma(a + b)
+    assert exact <= kl_upper_bound(a, b, da, db) + 1e-9 * (1.0 + a + b)
+
+
+def test_kl_upper_bound_is_tight_for_small_steps() -> None:
+    """For a small step the KL is ~ (1/2) delta^T H delta; the bound is within a few times it."""
+    from scipy.special import betaln, digamma
+
+    from sgbelief.fusion.operators.calibrated import kl_upper_bound
+
+    a, b, da, db = 20.0, 30.0, 0.3, 0.1
+    exact = betaln(a + da, b + db) - betaln(a, b) - da * digamma(a) - db * digamma(b) + (da + db) * digamma(a + b)
+    assert exact <= kl_upper_bound(a, b, da, db) <= 3.0 * exact

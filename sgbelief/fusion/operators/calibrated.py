@@ -9,6 +9,8 @@ from scipy import special as _sp
 
 from sgbelief.fusion import queues
 from sgbelief.fusion.calibration import MondrianCalibrator
+from sgbelief.errors import UnknownPredicateError
+from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.conformal import ConformalSlice, PredictionSet, no_coverage, nonconformity, prediction_set
@@ -47,6 +49,22 @@ def _digamma_estimate(x: float) -> float:
     return r + math.log(x) - 0.5 / x - f * (1 / 12 - f * (1 / 120 - f * (1 / 252 - f * (1 / 240 - f / 132))))
 
 
+def kl_upper_bound(a: float, b: float, da: float, db: float) -> float:
+    """An upper bound on KL(Beta(a, b) || Beta(a + da, b + db)) for da, db >= 0 (§4.3 revision test).
+
+    The KL between members of an exponential family is the Bregman divergence of its log-partition
+    A(a, b) = ln B(a, b), so with delta = (da, db) and the Hessian H of A,
+    KL = int_0^1 (1 - s) delta^T H((a, b) + s delta) delta ds, and
+    delta^T H delta = da^2 psi'(a) + db^2 psi'(b) - (da + db)^2 psi'(a + b) <= da^2 psi'(a) + db^2 psi'(b).
+    psi' decreases, so along the path (arguments >= a, b) it is at most its value at (a, b), and
+    psi'(x) = sum_k 1 / (x + k)^2 < 1 / x^2 + 1 / x. Hence
+    KL <= (da^2 (1/a + 1/a^2) + db^2 (1/b + 1/b^2)) / 2.
+    """
+    ia = 1.0 / a
+    ib = 1.0 / b
+    return 0.5 * (da * da * ia * (1.0 + ia) + db * db * ib * (1.0 + ib))
+
+
 def revision_kl_exceeds(a: float, b: float, da: float, db: float, tau_rev: float) -> bool:
     """True when KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev (the revision test of §4.3).
 
@@ -55,12 +73,16 @@ def revision_kl_exceeds(a: float, b: float, da: float, db: float, tau_rev: float
     than ``scipy.special``); only when the estimate is within a safe margin of ``tau_rev`` (far
     above the estimate's error, which scales with (a + b) log(a + b) for lgamma and with da + db
     for digamma) is the KL recomputed with ``betaln`` / ``digamma``, so the decision is always
-    the one the exact formula gives.
+    the one the exact formula gives. Before either, the bound of :func:`kl_upper_bound` settles
+    most calls (non-negative increments on a belief that already holds some evidence).
     """
     a2, b2 = a + da, b + db
+    margin = 1e-8 * (1.0 + a2 + b2 + da + db)
+    if da >= 0.0 and db >= 0.0 and kl_upper_bound(a, b, da, db) < tau_rev - 2.0 * margin:
+        return False
     dig = (da + db) * _digamma_estimate(a + b) - da * _digamma_estimate(a) - db * _digamma_estimate(b)
     est = (_lgamma(a2) + _lgamma(b2) - _lgamma(a2 + b2)) - (_lgamma(a) + _lgamma(b) - _lgamma(a + b)) + dig
-    if abs(est - tau_rev) > 1e-8 * (1.0 + a2 + b2 + da + db):
+    if abs(est - tau_rev) > margin:
         return est > tau_rev
     exact = _betaln(a2, b2) - _betaln(a, b) - da * _digamma(a) - db * _digamma(b) + (da + db) * _digamma(a + b)
     return exact > tau_rev
@@ -120,17 +142,24 @@ class CalibratedOperator(BaseOperator):
         """Apply one event (Alg. 1). ``report=False`` skips building the per-target outcomes
         (the returned report then has ``targets == ()``); the map, queues, provenance, stats and
         calibration state are the same either way."""
-        self._check(graph, event)
-        t = event.t
+        pred, c, ctx, eid, t = event.predicate, event.confidence, event.context, event.id, event.t
+        vocab = graph.vocabulary
+        if vocab is not None and pred not in vocab:
+            raise UnknownPredicateError(pred, vocab)
         resolutions = self.tick(graph, t) if t > graph.clock else []
         cfg = self.config
         tau_t, tau_rev, w0 = cfg.tau_t, cfg.tau_rev, cfg.w0
-        pred, c, ctx, eid = event.predicate, event.confidence, event.context, event.id
         prov = graph.provenance
         record = prov.record
+        pairs_get = prov._pairs.get
+        pending_map = prov._pending_by_pair  # pairs with entries waiting in Q or Q_bot
+        prior_a, prior_b = prov.prior_alpha, prov.prior_beta
         gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
         outcome_of = self.vocabulary.outcome_tables().get(pred) if self.vocabulary is not None else None
-        label_of = channel.label if (channel is not None and outcome_of is not None) else None
+        label_of = None
+        if channel is not None and outcome_of is not None:
+            label_of = channel.labels.get if type(channel) is FrameLabels else channel.label
+        frame = label_of is not None and type(channel) is FrameLabels
         claim_pos = c >= 0.5
         comod = self.check_compatibility
         n_targets = n_below = n_committed = n_quarantined = n_refused = 0
@@ -143,8 +172,11 @@ class CalibratedOperator(BaseOperator):
             if mass <= tau_t and not report:
                 n_below += 1
                 continue
-            label = label_of(node, t) if label_of is not None else None
-            y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
+            if label_of is None:
+                y = None
+            else:
+                label = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
+                y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
             if y is None:
                 verdict = _NO_CLAIM
             else:
@@ -156,7 +188,12 @@ class CalibratedOperator(BaseOperator):
                 continue
             if node not in gnx:
                 graph.ensure_node(node)
-            a, b = prov.alpha_beta(node, pred)
+            key = (node, pred)
+            log = pairs_get(key)
+            if log is None:
+                a, b = prior_a, prior_b
+            else:
+                a, b = log.alpha, log.beta
             if y is not None:
                 new_outcomes.append(y)
                 pair_score(pred, a / (a + b), y)
@@ -168,39 +205,57 @@ class CalibratedOperator(BaseOperator):
             if comod and verdict is _CONTRA:
                 # Property 2: refused and logged, never committed; geometry's stance opposes the claim
                 stance = -1 if claim_pos else 1
-                record(node, pred, eid, t, da, db, _REFUSED, stance=stance)
-                resolutions += queues.quarantine_feedback(prov, node, pred, stance, eid, t)
+                had_pending = key in pending_map
+                record(node, pred, eid, t, da, db, _REFUSED, stance)
+                if had_pending:  # otherwise the only pending entry is this refused one
+                    resolutions += queues.quarantine_feedback(prov, node, pred, stance, eid, t)
                 n_refused += 1
                 if report:
                     outcomes.append(TargetOutcome(node, mass, verdict, _A_REFUSED, 0.0, 0.0))
                 continue
             stance = 1 if lam > 1.0 else -1 if lam < 1.0 else 0
-            if prov._pending_by_pair:
+            if key in pending_map:
                 fb = queues.quarantine_feedback(prov, node, pred, stance, eid, t)
                 if fb:
                     resolutions += fb
                     a, b = prov.alpha_beta(node, pred)
-            # revision test: KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev (§4.3)
-            if revision_kl_exceeds(a, b, da, db, tau_rev):
-                record(node, pred, eid, t, da, db, _QUARANTINED, stance=stance)
+            # revision test: KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev (§4.3); the bound
+            # settles it without special functions when it is far below tau_rev
+            if kl_upper_bound(a, b, da, db) < tau_rev - 2e-8 * (1.0 + a + b + 2.0 * (da + db)):
+                exceeds = False
+            else:
+                exceeds = revision_kl_exceeds(a, b, da, db, tau_rev)
+            if exceeds:
+                record(node, pred, eid, t, da, db, _QUARANTINED, stance)
                 n_quarantined += 1
                 if report:
                     outcomes.append(TargetOutcome(node, mass, verdict, _A_QUARANTINED, 0.0, 0.0))
             else:
-                record(node, pred, eid, t, da, db, _COMMITTED, stance=stance)
+                record(node, pred, eid, t, da, db, _COMMITTED, stance)
                 n_committed += 1
                 if report:
                     outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))
-            if comod and verdict is _CORR and prov._pending_by_pair:
+            if comod and verdict is _CORR and key in pending_map:
                 resolutions += queues.resolve_disagreements(prov, node, pred, t)
-        self._add_counts(n_targets, n_below, n_committed, n_quarantined, n_refused)
+        stats = self.stats
+        stats["events"] += 1
+        stats["targets"] += n_targets
+        if n_below:
+            stats["below_tau_t"] += n_below
+        if n_committed:
+            stats["committed"] += n_committed
+        if n_quarantined:
+            stats["quarantined"] += n_quarantined
+        if n_refused:
+            stats["refused"] += n_refused
         if new_outcomes:
             add = self.calibrator_.add
             for y in new_outcomes:
                 add(ctx, pred, c, y)
         if resolutions:
             self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
-        return UpdateReport(eid, t, pred, tuple(outcomes), tuple(resolutions))
+            return UpdateReport(eid, t, pred, tuple(outcomes), tuple(resolutions))
+        return UpdateReport(eid, t, pred, tuple(outcomes) if outcomes else (), ())
 
     def _pair_score(self, predicate: str, p: float, y: int) -> None:
         sl = self.pair_conformal_.get(predicate)
