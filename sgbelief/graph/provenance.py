@@ -59,6 +59,7 @@ _REFUSED = EntryStatus.REFUSED
 _QUARANTINED = EntryStatus.QUARANTINED
 #: the counted set keyed by identity (hashing a str-Enum member runs Python code)
 _COUNTED_IDS = frozenset(id(s) for s in COUNTED)
+_PENDING_IDS = frozenset(id(s) for s in PENDING)
 
 
 class ProvenanceEntry:
@@ -107,11 +108,11 @@ class ProvenanceEntry:
 
     @property
     def counted(self) -> bool:
-        return self.status in COUNTED
+        return id(self.status) in _COUNTED_IDS
 
     @property
     def pending(self) -> bool:
-        return self.status in PENDING
+        return id(self.status) in _PENDING_IDS
 
     def as_tuple(self) -> tuple[str | None, int, float, float, str]:
         """(event id, t, d_alpha, d_beta, status) as in the paper's log."""
@@ -238,7 +239,7 @@ class ProvenanceStore:
         log = self._pairs.get((node, predicate))
         if log is None:
             return self.prior_alpha, self.prior_beta
-        counted = [e for e in log.entries if e.status in COUNTED]
+        counted = [e for e in log.entries if id(e.status) in _COUNTED_IDS]
         return (
             self.prior_alpha + math.fsum(e.d_alpha for e in counted),
             self.prior_beta + math.fsum(e.d_beta for e in counted),
@@ -263,11 +264,11 @@ class ProvenanceStore:
             log = self._pairs[key] = _PairLog(self.prior_alpha, self.prior_beta)
         entry = ProvenanceEntry(event_id, t, d_alpha, d_beta, status, node, predicate, stance)
         log.entries.append(entry)
-        # identity test first: hashing a str-Enum member for a frozenset lookup is slow
-        if status is _COMMITTED or status in COUNTED:
+        # identity tests: hashing a str-Enum member for a frozenset lookup runs Python code
+        if status is _COMMITTED or id(status) in _COUNTED_IDS:
             log.alpha += d_alpha
             log.beta += d_beta
-        elif status in PENDING:
+        elif status is _REFUSED or status is _QUARANTINED:
             self._add_pending(key, entry)
         if event_id is not None:
             bucket = self._by_event.get(event_id)
@@ -304,8 +305,8 @@ class ProvenanceStore:
         """
         if not entry.alive:
             raise RetractionError(f"entry of event {entry.event_id!r} is no longer in the store")
-        was_counted = entry.status in COUNTED
-        was_pending = entry.status in PENDING
+        was_counted = id(entry.status) in _COUNTED_IDS
+        was_pending = id(entry.status) in _PENDING_IDS
         log = self._pairs[(entry.node, entry.predicate)]
         if was_counted:
             log.alpha -= entry.d_alpha
@@ -314,18 +315,20 @@ class ProvenanceStore:
             entry.d_alpha *= scale
             entry.d_beta *= scale
         entry.status = status
-        if status in COUNTED:
+        counted = id(status) in _COUNTED_IDS
+        pending = id(status) in _PENDING_IDS
+        if counted:
             log.alpha += entry.d_alpha
             log.beta += entry.d_beta
-        if was_pending and status not in PENDING:
+        if was_pending and not pending:
             self._drop_pending(entry)
-        elif status in PENDING and not was_pending:
+        elif pending and not was_pending:
             self._add_pending((entry.node, entry.predicate), entry)
-        if was_counted and status not in COUNTED:
+        if was_counted and not counted:
             self._refresh(log)
 
     def _refresh(self, log: _PairLog) -> None:
-        counted = [e for e in log.entries if e.status in COUNTED]
+        counted = [e for e in log.entries if id(e.status) in _COUNTED_IDS]
         log.alpha = self.prior_alpha + math.fsum(e.d_alpha for e in counted)
         log.beta = self.prior_beta + math.fsum(e.d_beta for e in counted)
 
@@ -377,7 +380,7 @@ class ProvenanceStore:
         for eid in ids:
             for entry in self._by_event.pop(eid):
                 key = (entry.node, entry.predicate)
-                if entry.status in PENDING:
+                if id(entry.status) in _PENDING_IDS:
                     self._drop_pending(entry)
                 entry.alive = False
                 log = self._pairs[key]
@@ -514,7 +517,7 @@ class ProvenanceStore:
             for entry in log.entries:
                 entry.alive = False
                 dropped += entry.n_folded
-                if entry.status in PENDING:
+                if id(entry.status) in _PENDING_IDS:
                     self._drop_pending(entry)
                 if entry.event_id is not None:
                     bucket = self._by_event.get(entry.event_id)
@@ -635,7 +638,7 @@ class ProvenanceStore:
             for e in all_entries:
                 if e.status is not EntryStatus.COMPACTED:
                     store._timeline.append(e)
-                if e.status in PENDING:
+                if id(e.status) in _PENDING_IDS:
                     store._add_pending((e.node, e.predicate), e)
             for eid in data.get("compacted_ids", []):
                 store._remember_compacted(eid)
