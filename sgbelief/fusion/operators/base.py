@@ -56,6 +56,9 @@ class BaseOperator:
         cls = type(self)
         #: the lean path may apply _split directly (the subclass did not override _increment)
         self._linear = cls._increment is BaseOperator._increment and cls._split is not BaseOperator._split
+        self._has_timeouts = cls._timeouts is not BaseOperator._timeouts
+        self._tick_config: OperatorConfig | None = None
+        self._interval = 0
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"
@@ -68,8 +71,11 @@ class BaseOperator:
             return []
         graph.clock = t
         cfg = self.config
-        out = self._timeouts(graph, t)
-        interval = cfg.compaction_interval
+        out = self._timeouts(graph, t) if self._has_timeouts else []
+        if cfg is not self._tick_config:  # derived once per config (configs are immutable)
+            self._tick_config = cfg
+            self._interval = cfg.compaction_interval
+        interval = self._interval
         epoch = t // interval
         meta = graph.meta
         last = meta.get("compaction_epoch", 0)
