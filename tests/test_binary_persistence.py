@@ -69,7 +69,7 @@ def _signature(g: SceneGraph) -> dict[str, Any]:
         "quarantine": [e.as_tuple() for e in prov.quarantine if e.alive and e.status is EntryStatus.QUARANTINED],
         "disagreement": [e.as_tuple() for e in prov.disagreement if e.alive and e.status is EntryStatus.REFUSED],
         "timeline": [e.as_tuple() for e in prov._timeline if e.alive],
-        "by_event": {k: sorted(e.as_tuple() for e in v) for k, v in prov._by_event.items()},
+        "by_event": {k: sorted(e.as_tuple() for e in v) for k, v in prov.event_index().items()},
         "compacted": (list(prov._compacted_order), prov._compacted_order.maxlen, prov.n_compacted, prov.remember_compacted),
         "nodes_of_entries": all(e.node == k[0] and e.predicate == k[1] for k, log in prov._pairs.items()
                                 for e in log.entries),

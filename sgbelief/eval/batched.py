@@ -368,7 +368,8 @@ def _index_live(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, ev: np.
     ordered = live if idr.unique else [live[i] for i in order.tolist()]
     by_event, ids = prov._by_event, cols.event_ids
     for owner, begin, end in zip(owners, bounds[:-1], bounds[1:]):
-        by_event[ids[owner]] = ordered[begin:end]
+        # one entry: the entry itself (as ProvenanceStore.record builds the index)
+        by_event[ids[owner]] = ordered[begin] if end - begin == 1 else ordered[begin:end]
 
 
 # ------------------------------------------------------------------ replay
@@ -523,7 +524,7 @@ def provenance_signature(graph: SceneGraph) -> dict[str, Any]:
         "quarantine": [entry(e) for e in prov.quarantine],
         "disagreement": [entry(e) for e in prov.disagreement],
         "pending_by_pair": {k: [entry(e) for e in v] for k, v in prov._pending_by_pair.items()},
-        "by_event": [(k, [entry(e) for e in v]) for k, v in prov._by_event.items()],
+        "by_event": [(k, [entry(e) for e in v]) for k, v in prov.event_index().items()],
         "timeline": [entry(e) for e in prov._timeline],
         "compacted_order": list(prov._compacted_order),
         "compacted_memory_bound": prov._compacted_order.maxlen,

@@ -1019,15 +1019,18 @@ def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[
     named = np.flatnonzero(~null)
     ev = eid_arr[named].tolist()
     ents = list(map(pick, named.tolist()))
-    by_event = dict(zip(ev, map(list, zip(ents))))
+    # (an id with one entry maps to the entry itself, as ProvenanceStore.record builds it)
+    by_event: dict[str, Any] = dict(zip(ev, ents))
     if len(by_event) != len(ev):  # some event has several entries
         by_event = {}
         for eid, e in zip(ev, ents):
-            bucket = by_event.get(eid)
-            if bucket is None:
-                by_event[eid] = [e]
+            prev = by_event.get(eid)
+            if prev is None:
+                by_event[eid] = e
+            elif type(prev) is list:
+                prev.append(e)
             else:
-                bucket.append(e)
+                by_event[eid] = [prev, e]
     store._by_event = by_event
     store._timeline = deque(map(pick, timeline.tolist()))
     store.quarantine = deque(map(pick, queues["quarantine"].tolist()))

@@ -126,6 +126,15 @@ class ProvenanceEntry:
         )
 
 
+def _event_list(found: ProvenanceEntry | list[ProvenanceEntry] | None) -> list[ProvenanceEntry]:
+    """A value of the event index as a (new) list of entries."""
+    if found is None:
+        return []
+    if type(found) is list:
+        return list(found)
+    return [found]  # type: ignore[list-item]
+
+
 class _PairLog:
     __slots__ = ("alpha", "beta", "entries")
 
@@ -157,7 +166,9 @@ class ProvenanceStore:
         self._compacted_order: deque[str] = deque(maxlen=0)
         self.remember_compacted = int(remember_compacted)
         self._pairs: dict[PairKey, _PairLog] = {}
-        self._by_event: dict[str, list[ProvenanceEntry]] = {}
+        # event id -> its entry, or the list of its entries when it has several (most events have
+        # one: no list is allocated for them); use _event_list() to read it
+        self._by_event: dict[str, ProvenanceEntry | list[ProvenanceEntry]] = {}
         # every live, not-yet-compacted entry in arrival order (drives amortised compaction)
         self._timeline: deque[ProvenanceEntry] = deque()
         self.n_compacted = 0
@@ -205,7 +216,12 @@ class ProvenanceStore:
         return list(log.entries) if log is not None else []
 
     def event_entries(self, event_id: str) -> list[ProvenanceEntry]:
-        return list(self._by_event.get(event_id, ()))
+        """The live entries an event recorded, in recording order."""
+        return _event_list(self._by_event.get(event_id))
+
+    def event_index(self) -> dict[str, list[ProvenanceEntry]]:
+        """Every event id with live entries -> those entries (a copy, in the index's order)."""
+        return {eid: _event_list(v) for eid, v in self._by_event.items()}
 
     def has_event(self, event_id: str) -> bool:
         return event_id in self._by_event
@@ -271,11 +287,14 @@ class ProvenanceStore:
         elif status is _REFUSED or status is _QUARANTINED:
             self._add_pending(key, entry)
         if event_id is not None:
-            bucket = self._by_event.get(event_id)
-            if bucket is None:
-                self._by_event[event_id] = [entry]
-            else:
-                bucket.append(entry)
+            by_event = self._by_event
+            prev = by_event.get(event_id)
+            if prev is None:
+                by_event[event_id] = entry
+            elif type(prev) is list:
+                prev.append(entry)
+            else:  # a second entry: the id's value becomes a list (its place in the dict is kept)
+                by_event[event_id] = [prev, entry]
         self._timeline.append(entry)
         return entry
 
@@ -343,8 +362,8 @@ class ProvenanceStore:
             if eid in seen:
                 continue
             seen.add(eid)
-            entries = self._by_event.get(eid)
-            if entries is None:
+            found = self._by_event.get(eid)
+            if found is None:
                 if eid in self._compacted_order:  # a linear scan, on this error path only
                     raise RetractionError(
                         f"event {eid!r} was folded into a compacted increment (older than the provenance "
@@ -357,10 +376,10 @@ class ProvenanceStore:
                     )
                 continue  # a dependent that was already retracted on its own
             order.append(eid)
-            for entry in entries:
+            for entry in _event_list(found):
                 if entry.corroborated_by:
                     for dep in entry.corroborated_by:
-                        dep_entries = self._by_event.get(dep)
+                        dep_entries = _event_list(self._by_event.get(dep))
                         if cascade_window is not None and dep_entries:
                             if all(d.t - entry.t > cascade_window for d in dep_entries):
                                 continue
@@ -378,7 +397,7 @@ class ProvenanceStore:
         ids = self._closure(event_id, cascade_window)
         touched: set[PairKey] = set()
         for eid in ids:
-            for entry in self._by_event.pop(eid):
+            for entry in _event_list(self._by_event.pop(eid)):
                 key = (entry.node, entry.predicate)
                 if id(entry.status) in _PENDING_IDS:
                     self._drop_pending(entry)
@@ -480,11 +499,10 @@ class ProvenanceStore:
                 eid = entry.event_id
                 if eid is not None:
                     same_event = by_event.get(eid)
-                    if same_event is not None:
-                        if len(same_event) == 1 and same_event[0] is entry:
-                            del by_event[eid]
-                            gone.append(eid)
-                            continue
+                    if same_event is entry:
+                        del by_event[eid]
+                        gone.append(eid)
+                    elif type(same_event) is list:
                         try:
                             same_event.remove(entry)
                         except ValueError:
@@ -521,7 +539,9 @@ class ProvenanceStore:
                     self._drop_pending(entry)
                 if entry.event_id is not None:
                     bucket = self._by_event.get(entry.event_id)
-                    if bucket is not None:
+                    if bucket is entry:
+                        del self._by_event[entry.event_id]
+                    elif type(bucket) is list:
                         bucket[:] = [e for e in bucket if e is not entry]
                         if not bucket:
                             del self._by_event[entry.event_id]
