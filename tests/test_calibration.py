@@ -12,6 +12,7 @@ from sklearn.isotonic import IsotonicRegression
 
 from sgbelief.fusion.calibration import CalibrationSlice, MondrianCalibrator
 from sgbelief.fusion.config import CalibrationConfig
+from sgbelief.fusion.conformal import nonconformity
 
 
 def _data(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -181,3 +182,288 @@ def test_remove_sorted_removes_one_occurrence_each(values: list[int], data: st.D
     np.testing.assert_array_equal(out, np.sort(expected))
     with pytest.raises(ValueError):
         remove_sorted(base, np.array([99.0]))
+
+
+# ---------------------------------------------------------------------------------------------
+# fast paths: the distinct-confidence fit, the small (Python list) path, lazy fits, the reference
+
+
+def _sklearn_knots(c: np.ndarray, y: np.ndarray) -> tuple[list[float], list[float]]:
+    ref = IsotonicRegression(y_min=0.0, y_max=1.0, out_of_bounds="clip").fit(c, y)
+    return ref.X_thresholds_.tolist(), ref.y_thresholds_.tolist()
+
+
+def _odd_confidences(rng: np.random.Generator, n: int, kind: int) -> np.ndarray:
+    if kind == 0:  # continuous
+        return rng.random(n)
+    if kind == 1:  # heavily tied (quantised)
+        return np.round(rng.random(n), int(rng.integers(1, 4)))
+    if kind == 2:  # chains of near-ties (< 1e-15 apart): scikit-learn's own pooling rule applies
+        return rng.choice([0.25, 0.5, 0.75], n) + rng.integers(0, 8, n) * 3e-16
+    return rng.choice([0.0, 1.0, 0.5, 1e-300, 1 - 2**-53], n)  # extremes
+
+
+@pytest.mark.parametrize("small", [True, False])
+def test_fit_is_bit_identical_to_scikit_learn_on_both_paths(small: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Knots == IsotonicRegression's X_thresholds_ / y_thresholds_ exactly (==, not isclose), on the
+    Python-list path (small slices) and the numpy distinct-confidence path."""
+    from sgbelief.fusion import calibration, conformal
+
+    monkeypatch.setattr(calibration, "SMALL", 10**9 if small else 0)
+    monkeypatch.setattr(conformal, "SMALL", 10**9 if small else 0)
+    rng = np.random.default_rng(11)
+    for trial in range(120):
+        n = int(rng.integers(1, 300))
+        c = _odd_confidences(rng, n, trial % 4)
+        y = (rng.random(n) < np.clip(c, 0, 1)).astype(int)
+        s = CalibrationSlice(alpha=0.1)
+        for ci, yi in zip(c.tolist(), y.tolist()):
+            s.add(ci, yi)
+        s.refit()
+        assert (s.kx, s.ky) == _sklearn_knots(c, y)
+        assert type(s.ux) is (list if small else np.ndarray)
+        np.testing.assert_array_equal(s.sx0, np.sort(c[y == 0]))
+        np.testing.assert_array_equal(s.sx1, np.sort(c[y == 1]))
+        assert s.n == s.n_fit == n and s.n_pos == y.sum() and s.base_rate == y.sum() / n
+
+
+@pytest.mark.parametrize("capacity", [None, 16, 50, 300])
+def test_small_and_numpy_paths_and_lazy_fits_agree(capacity: int | None, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The same stream through the Python-list path, the numpy path and the crossing between them,
+    read after every refit or only at the end (lazy fits merging many batches), gives the same
+    knots, base rate, sorted outcomes, window and conformal scores, also across sliding-window
+    evictions (and batches that alone overflow the window)."""
+    from sgbelief.fusion import calibration, conformal
+
+    rng = np.random.default_rng(12)
+    n = 1500
+    c = np.round(rng.beta(2, 2, n), 3)
+    y = (rng.random(n) < c).astype(int)
+
+    def run(small: int, read_every: bool, min_refit: int) -> list:
+        monkeypatch.setattr(calibration, "SMALL", small)
+        monkeypatch.setattr(conformal, "SMALL", small)
+        s = CalibrationSlice(alpha=0.1, capacity=capacity, min_refit=min_refit)
+        states = []
+        for i, (ci, yi) in enumerate(zip(c.tolist(), y.tolist())):
+            s.add(ci, yi)
+            if s.n - s.n_fit >= s.refit_gap:
+                s.refit()
+                if read_every or i > n - 40:
+                    states.append((s.kx, s.ky, s.base_rate, s.log_prior_odds, s.n, s.n_pos, s.n_seen,
+                                   s.sx0.tolist(), s.sx1.tolist(), list(s.fc), list(s.fy), list(s.conformal.sorted)))
+        return states
+
+    ref = run(0, True, 8)
+    assert run(10**9, True, 8) == ref  # Python lists throughout
+    assert run(128, True, 8) == ref  # lists, then numpy
+    lazy = run(0, False, 8)
+    assert lazy == ref[len(ref) - len(lazy):]
+
+
+@pytest.mark.parametrize("capacity", [16, 50, 300])
+def test_batches_larger_than_the_window_equal_a_fresh_fit_on_the_tail(capacity: int) -> None:
+    """Refits committing batches larger than the window, read only at the end (the older batches
+    are dropped unmerged): same as a fresh fit on the last ``capacity`` outcomes."""
+    c, y = _data(2000, seed=13)
+    c = np.round(c, 3)
+    s = CalibrationSlice(alpha=0.1, capacity=capacity, min_refit=3 * capacity + 1)
+    for ci, yi in zip(c.tolist(), y.tolist()):
+        s.add(ci, yi)
+        if s.n - s.n_fit >= s.refit_gap:
+            s.refit()
+    s.refit()
+    fresh = CalibrationSlice(alpha=0.1)
+    for ci, yi in zip(c[-capacity:].tolist(), y[-capacity:].tolist()):
+        fresh.add(ci, yi)
+    fresh.refit()
+    assert s.n == s.n_fit == capacity and s.n_seen == 2000
+    assert (s.kx, s.ky, s.base_rate, s.n_pos) == (fresh.kx, fresh.ky, fresh.base_rate, fresh.n_pos)
+    assert list(s.fc) == c[-capacity:].tolist() and list(s.conformal.fifo) == [
+        nonconformity(ci, yi) for ci, yi in zip(c[-capacity:].tolist(), y[-capacity:].tolist())
+    ]
+    assert list(s.conformal.sorted) == list(fresh.conformal.sorted) and s.conformal.n_sorted == capacity
+
+
+class _ReferenceCalibrator:
+    """The calibrator of §4.1 written the slow, obvious way (the specification the fast one must
+    reproduce exactly): every outcome kept, a refit fits scikit-learn's IsotonicRegression on the
+    last ``buffer_size`` outcomes and sorts their scores."""
+
+    def __init__(self, cfg: CalibrationConfig, alpha: float) -> None:
+        self.cfg, self.alpha = cfg, alpha
+        self.levels: dict[tuple[str, str], dict] = {}
+
+    def _level(self, key: tuple[str, str]) -> dict:
+        return self.levels.setdefault(key, {"out": [], "n_fit": 0, "kx": [], "ky": [], "lpo": 0.0, "scores": [], "alpha_t": self.alpha})
+
+    def _refit(self, lv: dict) -> None:
+        from sgbelief.fusion.conformal import nonconformity
+
+        cap = self.cfg.buffer_size
+        win = lv["out"][-cap:] if cap is not None else lv["out"]
+        c = np.array([o[0] for o in win])
+        y = np.array([1 if o[1] else 0 for o in win])
+        lv["kx"], lv["ky"] = _sklearn_knots(c, y)
+        n = len(win)
+        lv["n_fit"] = n
+        eps = 0.5 / (n + 1)
+        pi = min(max(y.sum() / n, eps), 1 - eps)
+        lv["lpo"] = math.log(pi / (1 - pi))
+        lv["scores"] = sorted(nonconformity(ci, yi) for ci, yi in win)
+
+    def add(self, k: str, p: str, c: float, y: int) -> None:
+        from sgbelief.fusion.conformal import conformal_quantile, nonconformity
+
+        levels = [self._level(key) for key in ((k, p), ("*", p), ("*", "*"))]
+        first = levels[0]
+        if first["n_fit"] > 0 and k != "*":
+            a = first["alpha_t"]
+            q = conformal_quantile(first["scores"], a) if a > 0 else math.inf
+            err = 0 if nonconformity(c, y) <= q else 1
+            first["alpha_t"] += self.cfg.adaptive_gamma * (self.alpha - err)
+        for lv in levels:  # (a "*" context: its slice is the predicate pool, which gets the outcome twice)
+            lv["out"].append((c, y))
+            pending = len(lv["out"]) - lv.get("seen_fit", 0)
+            if pending >= max(self.cfg.min_refit, self.cfg.refit_growth * lv["n_fit"]) or lv["n_fit"] == 0:
+                lv["seen_fit"] = len(lv["out"])
+                self._refit(lv)
+
+    def _log_lr(self, lv: dict, c: float) -> float:
+        kx, ky = lv["kx"], lv["ky"]
+        i = int(np.searchsorted(kx, c, side="right"))
+        if i == 0:
+            pr = ky[0]
+        elif i >= len(kx):
+            pr = ky[-1]
+        else:
+            x0, x1 = kx[i - 1], kx[i]
+            pr = ky[i] if x1 == x0 else ky[i - 1] + (ky[i] - ky[i - 1]) * (c - x0) / (x1 - x0)
+        eps = 0.5 / (lv["n_fit"] + 1)
+        pr = min(max(pr, eps), 1 - eps)
+        lo = math.log(pr / (1 - pr))
+        return lo - lv["lpo"] if self.cfg.lr_reference == "slice" else lo
+
+    def likelihood_ratio(self, c: float, k: str, p: str) -> tuple[float, float]:
+        cfg, t = self.cfg, self.cfg.target_size
+        s, pp, g = (self.levels.get(key, {"n_fit": 0}) for key in ((k, p), ("*", p), ("*", "*")))
+        if g["n_fit"] == 0:
+            if cfg.cold_start == "neutral":
+                return 1.0, cfg.kappa_min
+            cc = min(max(c, 1e-6), 1.0 - 1e-6)
+            return min(max(cc / (1.0 - cc), 1.0 / cfg.lr_max), cfg.lr_max), cfg.kappa_min
+        if s["n_fit"] >= t:
+            log_lr = self._log_lr(s, c)
+        else:
+            if pp["n_fit"] >= t:
+                log_lr = self._log_lr(pp, c)
+            else:
+                log_lr = self._log_lr(g, c)
+                if pp["n_fit"]:
+                    lp = pp["n_fit"] / t
+                    log_lr = lp * self._log_lr(pp, c) + (1.0 - lp) * log_lr
+            if s["n_fit"]:
+                ls = s["n_fit"] / t
+                log_lr = ls * self._log_lr(s, c) + (1.0 - ls) * log_lr
+        m = math.log(cfg.lr_max)
+        log_lr = min(max(log_lr, -m), m)
+        return math.exp(log_lr), min(max(s["n_fit"] / t, cfg.kappa_min), 1.0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.sampled_from([None, 16, 40, 200]),
+    st.sampled_from(["slice", "uniform"]),
+    st.sampled_from(["raw", "neutral"]),
+    st.integers(1, 12),
+    st.sampled_from([0.05, 0.1, 0.5]),
+    st.integers(0, 2**32 - 1),
+)
+def test_calibrator_equals_the_reference_exactly(buffer_size, lr_reference, cold_start, min_refit, growth, seed) -> None:
+    """Every Lambda_hat / kappa_hat, alpha_t, threshold and counter equals (==) the slow reference
+    (scikit-learn refit on the window at the same schedule), for several contexts including "*"."""
+    cfg = CalibrationConfig(buffer_size=buffer_size, lr_reference=lr_reference, cold_start=cold_start,
+                            min_refit=min_refit, refit_growth=growth, target_size=30, adaptive_gamma=0.05)
+    rng = np.random.default_rng(seed)
+    cal, ref = MondrianCalibrator(cfg, alpha=0.2), _ReferenceCalibrator(cfg, 0.2)
+    quant = int(rng.integers(1, 7))
+    for t in range(400):
+        k, p = ["a", "b", "*"][int(rng.integers(0, 3))], ["p", "q"][int(rng.integers(0, 2))]
+        c = round(float(rng.beta(2, 2)), quant)
+        y = int(rng.random() < c)
+        if t % 3 == 0:
+            for qk, qp in ((k, p), ("a", "q"), ("z", "p"), ("*", "*")):
+                probe = float(rng.random())
+                assert cal.likelihood_ratio(probe, qk, qp) == ref.likelihood_ratio(probe, qk, qp)
+        cal.add(k, p, c, y)
+        ref.add(k, p, c, y)
+    for key, lv in ref.levels.items():
+        s = cal.slices[key]
+        assert (s.n_fit, s.kx, s.ky, s.log_prior_odds) == (lv["n_fit"], lv["kx"], lv["ky"], lv["lpo"])
+        assert s.n_seen == len(lv["out"]) and s.conformal.alpha_t == lv["alpha_t"]
+        assert list(s.conformal.sorted) == lv["scores"]
+        for a in (0.05, 0.2, 0.5):
+            assert s.conformal.threshold(a) == conformal_quantile_ref(lv["scores"], a)
+
+
+def conformal_quantile_ref(scores: list[float], alpha: float) -> float:
+    n = len(scores)
+    rank = math.ceil((n + 1) * (1.0 - alpha))
+    return -math.inf if alpha >= 1 else math.inf if rank > n or n == 0 else -math.inf if rank < 1 else scores[rank - 1]
+
+
+def test_counters_and_pending_views() -> None:
+    s = CalibrationSlice(alpha=0.1, capacity=20)
+    for i in range(57):
+        s.add(i / 60, i % 3 == 0)
+        if s.n - s.n_fit >= s.refit_gap:
+            s.refit()
+    pend = len(s.c)
+    assert s.n == s.n_fit + pend and s.n_seen == 57 and s.n_fit == 20
+    assert list(s.y) == [int(i % 3 == 0) for i in range(57 - pend, 57)]
+    assert s.n_pos == sum(1 for i in range(57 - pend - 20, 57) if i % 3 == 0)  # window + pending
+    assert len(s.conformal.pending) == pend and s.conformal.n == s.n
+    with pytest.raises(ZeroDivisionError):
+        CalibrationSlice(alpha=0.1).refit()
+
+
+def test_pickled_calibrator_continues_identically() -> None:
+    """A calibrator copied mid-stream (pickle, deepcopy) with pending outcomes and unmerged
+    batches gives the same results as the original from there on."""
+    import copy
+    import pickle
+
+    cfg = CalibrationConfig(buffer_size=64, target_size=40)
+    cal = MondrianCalibrator(cfg, alpha=0.1)
+    rng = np.random.default_rng(14)
+    stream = [(["a", "b"][int(rng.integers(0, 2))], ["p", "q"][int(rng.integers(0, 2))], round(float(rng.random()), 3)) for _ in range(900)]
+    for k, p, c in stream[:450]:
+        cal.add(k, p, c, int(rng.random() < c))
+    clones = [pickle.loads(pickle.dumps(cal)), copy.deepcopy(cal)]
+    for k, p, c in stream[450:]:
+        y = int(rng.random() < c)
+        for m in (cal, *clones):
+            m.add(k, p, c, y)
+        assert len({m.likelihood_ratio(c, k, p) for m in (cal, *clones)}) == 1
+    assert cal.summary() == clones[0].summary() == clones[1].summary()
+
+
+@pytest.mark.parametrize("n", [20, 400])
+def test_nan_confidences_fit_as_before(n: int) -> None:
+    """NaN confidences (sorted last, pooled into the last point by ``_make_unique``) give the knots
+    of ``_isotonic_knots`` on the sorted outcomes (NaN always takes the numpy path)."""
+    from sgbelief.fusion.calibration import _isotonic_knots
+
+    rng = np.random.default_rng(15)
+    c = np.round(rng.random(n), 2)
+    c[rng.random(n) < 0.1] = np.nan
+    y = (rng.random(n) < 0.5).astype(int)
+    s = CalibrationSlice(alpha=0.1)
+    for ci, yi in zip(c.tolist(), y.tolist()):
+        s.add(ci, yi)
+    s.refit()
+    x = np.concatenate((np.sort(c[y == 0]), np.sort(c[y == 1])))
+    order = np.argsort(x, kind="stable")
+    kx, ky = _isotonic_knots(x[order], np.concatenate((np.zeros((y == 0).sum()), np.ones((y == 1).sum())))[order])
+    assert np.array_equal(s.kx, kx, equal_nan=True) and np.array_equal(s.ky, ky, equal_nan=True)
+    assert s.n == n and len(s.sx0) + len(s.sx1) == n

@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sgbelief.fusion.calibration import MondrianCalibrator
 from sgbelief.fusion.config import CalibrationConfig
@@ -86,3 +88,85 @@ def test_adaptive_keeps_long_run_coverage_under_drift_static_does_not() -> None:
     # Gibbs & Candes: |long-run miscoverage - alpha| <= (1 + gamma) / (gamma T) ~ 0.008 here; tolerance 0.03
     assert abs(adaptive_cov - (1 - ALPHA)) <= 0.03, adaptive_cov
     assert abs(static_late - (1 - ALPHA)) > 0.03, static_late
+
+
+# ---------------------------------------------------------------------------------------------
+# ConformalSlice: add_score / add_outcome, lazy merges, list and numpy paths
+
+
+def _reference_window(scores: list[float], capacity: int | None) -> list[float]:
+    return sorted(scores[-capacity:] if capacity is not None else scores)
+
+
+@pytest.mark.parametrize("capacity", [None, 16, 100])
+@pytest.mark.parametrize("small", [0, 128, 10**9])
+def test_add_score_equals_pending_plus_refresh_rule(capacity: int | None, small: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``add_score(s, min_refit, growth)`` / ``add_outcome(c, y, ...)`` == ``pending.append(s)`` then a
+    refresh once the pending ones reach max(min_refit, growth * n_sorted) (the operator's old
+    pair-score path); the sorted view is the last ``capacity`` committed scores, ascending, read
+    after every refresh or only now and then (lazy merges), on the list and numpy paths."""
+    from sgbelief.fusion import conformal
+    from sgbelief.fusion.conformal import ConformalSlice
+
+    monkeypatch.setattr(conformal, "SMALL", small)
+    rng = np.random.default_rng(21)
+    a, b, c_ = ConformalSlice(ALPHA, capacity), ConformalSlice(ALPHA, capacity), ConformalSlice(ALPHA, capacity)
+    committed: list[float] = []
+    seen: list[float] = []
+    for i in range(1500):
+        c = float(np.round(rng.random(), 3))
+        y = int(rng.random() < c)
+        s = nonconformity(c, y)
+        seen.append(s)
+        # the old protocol, by hand
+        a.pending.append(s)
+        if a.n_sorted + len(a.pending) - a.n_sorted >= max(8, 0.1 * a.n_sorted) or a.n_sorted == 0:
+            a.refresh()
+            committed = list(seen)
+        b.add_score(s, 8, 0.1)
+        c_.add_outcome(c, y, 8, 0.1)
+        assert b.n_sorted == a.n_sorted == c_.n_sorted and len(b.pending) == len(a.pending) == len(c_.pending)
+        if i % 7 == 0 or i > 1480:
+            ref = _reference_window(committed, capacity)
+            assert list(b.sorted) == list(c_.sorted) == ref and b.n_sorted == len(ref)
+            for al in (0.05, 0.1, 0.5):
+                assert b.threshold(al) == c_.threshold(al) == conformal_quantile(ref, al)
+            assert b.coverage_of_rank(1.0) == sum(1 for v in ref if v <= 1.0)
+            if capacity is not None:
+                assert list(b.fifo) == (committed[-capacity:])
+    assert list(a.sorted) == list(b.sorted)
+
+
+def test_batches_beyond_capacity_are_dropped_unmerged() -> None:
+    from sgbelief.fusion.conformal import ConformalSlice
+
+    sl = ConformalSlice(ALPHA, capacity=20)
+    scores = [float(i % 13) / 7 for i in range(200)]
+    for i in range(0, 200, 50):
+        for s in scores[i : i + 50]:
+            sl.pending.append(s)
+        sl.refresh()
+        assert sl.n_sorted == 20 and sl.n_chunks <= 50
+    assert list(sl.sorted) == sorted(scores[-20:]) and list(sl.fifo) == scores[-20:]
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    st.lists(st.sampled_from([0.0, -0.0, 0.5, 1.0, 2.0, math.inf, math.nan, 1e-300]) | st.floats(-5, 5), max_size=40),
+    st.lists(st.sampled_from([0.0, -0.0, 0.5, 1.0, 2.0, math.inf, math.nan, 1e-300]) | st.floats(-5, 5), min_size=1, max_size=40),
+)
+def test_merge_sorted_is_bitwise_the_stable_merge(base: list[float], new: list[float]) -> None:
+    """merge_sorted == np.insert of the stably sorted new values after equal base values, bit for
+    bit (signed zeros and NaN included), with and without a payload."""
+    from sgbelief.fusion.conformal import merge_sorted
+
+    b = np.sort(np.array(base, dtype=np.float64), kind="stable")
+    nw = np.array(new, dtype=np.float64)
+    order = np.argsort(nw, kind="stable")
+    at = np.searchsorted(b, nw[order], side="right")
+    expected = np.insert(b, at, nw[order])
+    assert merge_sorted(b, nw).tobytes() == expected.tobytes()
+    pb, pn = np.arange(len(b)), 1000 + np.arange(len(nw))
+    m, p = merge_sorted(b, nw, (pb, pn))
+    assert m.tobytes() == expected.tobytes()
+    assert p.tolist() == np.insert(pb, at, pn[order]).tolist()

@@ -3,12 +3,25 @@
 from __future__ import annotations
 
 import math
+from array import array
+from bisect import bisect_left, insort_right
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 
 _EPS = 1e-12
 _ONE_MINUS_EPS = 1.0 - _EPS
+#: score buffers up to this size are kept as Python lists (numpy's fixed per-call cost dominates there)
+SMALL = 128
+_log = math.log
+
+
+def _no_nan(values: Iterable[float]) -> bool:
+    """True when the (short) sequence has no NaN (nor +inf together with -inf): Python's sort order
+    then equals numpy's."""
+    total = sum(values)
+    return total == total
 
 
 def nonconformity(c: float, y: int) -> float:
@@ -65,52 +78,151 @@ def no_coverage(reason: str) -> PredictionSet:
 
 
 class ConformalSlice:
-    """Scores of one calibration slice, the static threshold and the adaptive level alpha_t.
+    """Scores of one calibration slice (Eq. 1), the static threshold and the adaptive level alpha_t.
 
-    New scores wait in ``pending`` (O(1) append); ``refresh`` merges them into the sorted
-    numpy array ``sorted`` in O(n + k log k) (sort the k new ones, one linear merge), so the
-    amortised cost per score stays O(log n) and memory is 8 bytes per score. Queries are
-    O(1) after a refresh. With a ``capacity`` the slice is a sliding window over the most
-    recent ``capacity`` scores (the oldest are removed from the sorted view at the refresh that
-    pushes them out), so memory is bounded. The adaptive variant updates alpha_t online:
+    New scores wait in ``pending`` (O(1) append). ``refresh`` commits them (``n_sorted`` at once);
+    the merge into the ascending view is done when it is next read (``sorted``, ``threshold``, ...),
+    all committed batches at once (sort the k new, one linear merge: O(n + k log k)), the same view
+    as merging batch by batch; an unread slice costs O(1) per score. ``sorted`` is a Python list up
+    to ``SMALL`` scores, a float64 numpy array beyond; ties keep older scores first. With a
+    ``capacity``: a sliding window over the most recent scores. Adaptive level (Gibbs & Candès):
     alpha_{t+1} = alpha_t + gamma (alpha - err_t), err_t = 1 when y_t was not in the set.
     """
 
-    __slots__ = ("pending", "sorted", "n_sorted", "alpha_t", "n_err", "n_seen", "capacity", "fifo")
+    __slots__ = ("pending", "srt", "sfifo", "chunks", "n_chunks", "n_sorted", "alpha_t", "n_err", "n_seen", "capacity")
 
     def __init__(self, alpha: float, capacity: int | None = None) -> None:
-        self.pending: list[float] = []
-        self.sorted: np.ndarray = np.empty(0, dtype=np.float64)
+        self.pending: array = array("d")
+        #: the merged scores, ascending (read ``sorted``: it merges the committed batches first)
+        self.srt: list[float] | np.ndarray = []
+        #: the merged scores in arrival order (kept only with a capacity)
+        self.sfifo: list[float] | np.ndarray = []
+        #: batches committed by ``refresh`` and not merged yet (arrival order), and their total size
+        self.chunks: list[array] = []
+        self.n_chunks = 0
         self.n_sorted = 0
         self.alpha_t = alpha
         self.n_err = 0
         self.n_seen = 0
         self.capacity = capacity
-        #: the scores of ``sorted`` in arrival order (kept only with a capacity)
-        self.fifo: np.ndarray = np.empty(0, dtype=np.float64)
 
     @property
     def n(self) -> int:
         """Scores held (sorted + pending)."""
         return self.n_sorted + len(self.pending)
 
+    @property
+    def sorted(self) -> list[float] | np.ndarray:
+        """The committed scores, ascending."""
+        if self.chunks:
+            self.merge()
+        return self.srt
+
+    @property
+    def fifo(self) -> list[float] | np.ndarray:
+        """The scores of ``sorted`` in arrival order (kept only with a capacity)."""
+        if self.chunks:
+            self.merge()
+        return self.sfifo
+
     def add(self, score: float) -> None:
         self.pending.append(score)
 
+    def add_score(self, score: float, min_refit: int, refit_growth: float) -> None:
+        """Append one score; refresh once the pending ones reach max(min_refit, refit_growth * n_sorted)
+        (or at the first score). Same as ``pending.append(score)`` plus that rule, O(1)."""
+        p = self.pending
+        p.append(score)
+        m = self.n_sorted
+        k = len(p)
+        if m == 0 or (k >= min_refit and k >= refit_growth * m):
+            self.refresh()
+
+    def add_outcome(self, c: float, y: int, min_refit: int, refit_growth: float) -> None:
+        """``add_score(nonconformity(c, y), min_refit, refit_growth)`` with Eq. 1 inlined."""
+        if c < _EPS:
+            c = _EPS
+        elif c > _ONE_MINUS_EPS:
+            c = _ONE_MINUS_EPS
+        p = self.pending
+        p.append(-_log(c) if y == 1 else -_log(1.0 - c))
+        m = self.n_sorted
+        k = len(p)
+        if m == 0 or (k >= min_refit and k >= refit_growth * m):
+            self.refresh()
+
     def refresh(self) -> None:
-        """Merge the pending scores into the sorted view (evicting the oldest beyond capacity)."""
-        if self.pending:
-            new = np.array(self.pending, dtype=np.float64)
-            self.pending = []
-            if self.capacity is not None:
-                self.fifo, evicted, new = slide_window(self.fifo, new, self.capacity)
-                if len(evicted):
-                    self.sorted = remove_sorted(self.sorted, evicted)
-            self.sorted = merge_sorted(self.sorted, new)
-        self.n_sorted = len(self.sorted)
+        """Commit the pending scores to the sorted view (merged when it is next read), evicting the
+        oldest beyond capacity."""
+        pending = self.pending
+        if not pending:
+            return
+        p = pending[:] if type(pending) is array else array("d", pending)
+        del pending[:]  # the same object stays the pending buffer
+        chunks = self.chunks
+        chunks.append(p)
+        self.n_chunks += len(p)
+        n = self.n_sorted + len(p)
+        cap = self.capacity
+        if cap is not None:
+            if n > cap:
+                n = cap
+            if self.n_chunks >= cap:  # the committed batches alone fill the window: the merged scores all slide out
+                self.srt = []
+                self.sfifo = []
+                while self.n_chunks - len(chunks[0]) >= cap:
+                    self.n_chunks -= len(chunks.pop(0))
+        self.n_sorted = n
+
+    def merge(self) -> None:
+        """Merge the committed batches into the sorted view (as ``refresh`` did one batch at a time)."""
+        chunks = self.chunks
+        if not chunks:
+            return
+        new = chunks[0]
+        for ch in chunks[1:]:
+            new += ch
+        self.chunks = []
+        self.n_chunks = 0
+        srt = self.srt
+        if type(srt) is list and len(srt) + len(new) <= SMALL and _no_nan(new):  # no NaN: list order == numpy order
+            self._merge_small(srt, new)
+        else:
+            self._merge_numpy(np.frombuffer(new, dtype=np.float64))
+
+    def _merge_small(self, srt: list[float], new: array) -> None:
+        cap = self.capacity
+        if cap is not None:
+            fifo = self.sfifo
+            drop = len(fifo) + len(new) - cap
+            if drop > 0:
+                drop_old = min(drop, len(fifo))
+                for v in fifo[:drop_old]:  # remove_sorted: the leftmost equal score
+                    i = bisect_left(srt, v)
+                    if i >= len(srt) or srt[i] != v:
+                        raise ValueError("remove_sorted: values are not a sub-multiset of the sorted buffer")
+                    del srt[i]
+                new = new[max(drop - len(fifo), 0):]
+                fifo = fifo[drop_old:]  # type: ignore[assignment]
+            fifo.extend(new)  # type: ignore[union-attr]
+            self.sfifo = fifo
+        for v in new:  # merge_sorted: a new score goes after the equal ones already there
+            insort_right(srt, v)
+
+    def _merge_numpy(self, new: np.ndarray) -> None:
+        srt = self.srt
+        if type(srt) is list:
+            srt = np.array(srt, dtype=np.float64)
+        if self.capacity is not None:
+            self.sfifo, evicted, new = slide_window(np.asarray(self.sfifo, dtype=np.float64), new, self.capacity)
+            if len(evicted):
+                srt = remove_sorted(srt, evicted)  # type: ignore[arg-type]
+        self.srt = merge_sorted(srt, new)  # type: ignore[arg-type,assignment]
 
     def threshold(self, alpha: float) -> float:
-        return conformal_quantile(self.sorted, alpha)
+        if self.chunks:
+            self.merge()
+        return conformal_quantile(self.srt, alpha)
 
     def coverage_of_rank(self, q: float) -> int:
         return int(np.searchsorted(self.sorted, q, side="right"))
@@ -150,14 +262,33 @@ def remove_sorted(base: np.ndarray, values: np.ndarray) -> np.ndarray:
 
 def merge_sorted(base: np.ndarray, new: np.ndarray, *payload: tuple[np.ndarray, np.ndarray]) -> np.ndarray | tuple[np.ndarray, ...]:
     """Merge unsorted ``new`` into sorted ``base`` (O(n + k log k)); ``payload`` pairs
-    (base_values, new_values) are carried along in the same order. Ties keep base first."""
-    order = np.argsort(new, kind="stable")
-    new = new[order]
+    (base_values, new_values) are carried along in the same order. Ties keep base first, then
+    ``new`` in its order."""
+    if payload:
+        order = np.argsort(new, kind="stable")
+        new = new[order]
+    else:
+        srt = np.sort(new)  # (SIMD) sort; equal values are bit-identical unless zeros (+-0) or NaN,
+        if len(srt) and (not srt.all() or srt[-1] != srt[-1]):  # whose arrival order is kept then
+            srt = np.sort(new, kind="stable")
+        new = srt
     at = np.searchsorted(base, new, side="right")
-    merged = np.insert(base, at, new)
+    n, k = len(base), len(new)
+    at += np.arange(k)  # positions of the new values in the merged array
+    keep = np.ones(n + k, dtype=bool)
+    keep[at] = False
+    merged = np.empty(n + k, dtype=np.result_type(base, new))
+    merged[at] = new
+    merged[keep] = base
     if not payload:
         return merged
-    return (merged, *(np.insert(b, at, v[order]) for b, v in payload))
+    out = [merged]
+    for b, v in payload:
+        m = np.empty(n + k, dtype=np.result_type(b, v))
+        m[at] = v[order]
+        m[keep] = b
+        out.append(m)
+    return tuple(out)
 
 
 def prediction_set(c: float, q: float) -> frozenset[int]:
