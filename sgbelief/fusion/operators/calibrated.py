@@ -13,7 +13,7 @@ from sgbelief.errors import UnknownPredicateError
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig
-from sgbelief.fusion.conformal import ConformalSlice, PredictionSet, no_coverage, nonconformity, prediction_set
+from sgbelief.fusion.conformal import ConformalSlice, PredictionSet, no_coverage, prediction_set
 from sgbelief.fusion.operators.base import BaseOperator
 from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport
 from sgbelief.graph.provenance import EntryStatus
@@ -166,7 +166,8 @@ class CalibratedOperator(BaseOperator):
         lam = kappa = -1.0
         new_outcomes: list[int] = []
         outcomes: list[TargetOutcome] = []
-        pair_score = self._pair_score
+        pair_slice: ConformalSlice | None = None  # this predicate's pair-level scores, fetched once
+        min_refit, refit_growth = cfg.calibration.min_refit, cfg.calibration.refit_growth
         for node, mass in event.targets.items():
             n_targets += 1
             if mass <= tau_t and not report:
@@ -196,7 +197,9 @@ class CalibratedOperator(BaseOperator):
                 a, b = log.alpha, log.beta
             if y is not None:
                 new_outcomes.append(y)
-                pair_score(pred, a / (a + b), y)
+                if pair_slice is None:
+                    pair_slice = self._pair_slice(pred)
+                pair_slice.add_outcome(a / (a + b), y, min_refit, refit_growth)
             if lam < 0.0:
                 lam, kappa = self.calibrator_.likelihood_ratio(c, ctx, pred)
             w = w0 * kappa * mass
@@ -257,15 +260,17 @@ class CalibratedOperator(BaseOperator):
             return UpdateReport(eid, t, pred, tuple(outcomes), tuple(resolutions))
         return UpdateReport(eid, t, pred, tuple(outcomes) if outcomes else (), ())
 
-    def _pair_score(self, predicate: str, p: float, y: int) -> None:
+    def _pair_slice(self, predicate: str) -> ConformalSlice:
+        """The pair-level conformal scores of a predicate (created on first use)."""
         sl = self.pair_conformal_.get(predicate)
         if sl is None:
             sl = self.pair_conformal_[predicate] = ConformalSlice(self.config.alpha, self.config.calibration.buffer_size)
-        sl.pending.append(nonconformity(p, y))
-        n = sl.n_sorted + len(sl.pending)
+        return sl
+
+    def _pair_score(self, predicate: str, p: float, y: int) -> None:
+        """Record s(p_v, y) (Eq. 1 on the belief mean) for the pair-level sets of Property 1."""
         cfg = self.config.calibration
-        if n - sl.n_sorted >= max(cfg.min_refit, cfg.refit_growth * sl.n_sorted) or sl.n_sorted == 0:
-            sl.refresh()
+        self._pair_slice(predicate).add_outcome(p, y, cfg.min_refit, cfg.refit_growth)
 
     # ---------------------------------------------------------- reading
     def prediction_set(self, graph: SceneGraph, node: Any, predicate: str) -> PredictionSet:
