@@ -157,38 +157,25 @@ class BaseOperator:
             split = self._split(c) if self._linear else None
             if split is not None:  # a linear rule: d_alpha = T p, d_beta = T q for every target
                 p, q = split
-                for node, mass in event.targets.items():
-                    n_targets += 1
-                    if mass <= tau_t:
-                        n_below += 1
-                        continue
-                    if node not in gnx:
-                        graph.ensure_node(node)
+            increment = self._increment
+            for node, mass in event.targets.items():
+                n_targets += 1
+                if mass <= tau_t:
+                    n_below += 1
+                    continue
+                if node not in gnx:
+                    graph.ensure_node(node)
+                if split is not None:
                     da = mass * p
                     db = mass * q
-                    record(node, pred, eid, t, da, db, _COMMITTED, 1 if da > db else -1 if da < db else 0)
-                    n_committed += 1
-            else:
-                increment = self._increment
-                for node, mass in event.targets.items():
-                    n_targets += 1
-                    if mass <= tau_t:
-                        n_below += 1
-                        continue
-                    if node not in gnx:
-                        graph.ensure_node(node)
+                else:
                     inc = increment(graph, node, pred, c, mass)
-                    if inc is not None:
-                        da, db = inc
-                        record(node, pred, eid, t, da, db, _COMMITTED, 1 if da > db else -1 if da < db else 0)
-                        n_committed += 1
-            stats = self.stats
-            stats["events"] += 1
-            stats["targets"] += n_targets
-            if n_below:
-                stats["below_tau_t"] += n_below
-            if n_committed:
-                stats["committed"] += n_committed
+                    if inc is None:
+                        continue
+                    da, db = inc
+                record(node, pred, eid, t, da, db, _COMMITTED, 1 if da > db else -1 if da < db else 0)
+                n_committed += 1
+            self._add_counts(n_targets, n_below, n_committed)
             return UpdateReport(eid, t, pred, (), tuple(resolutions) if resolutions else ())
         increment = self._increment
         label_of = channel.label if channel is not None else None

@@ -240,17 +240,7 @@ class CalibratedOperator(BaseOperator):
                     outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))
             if comod and verdict is _CORR and key in pending_map:
                 resolutions += queues.resolve_disagreements(prov, node, pred, t)
-        stats = self.stats
-        stats["events"] += 1
-        stats["targets"] += n_targets
-        if n_below:
-            stats["below_tau_t"] += n_below
-        if n_committed:
-            stats["committed"] += n_committed
-        if n_quarantined:
-            stats["quarantined"] += n_quarantined
-        if n_refused:
-            stats["refused"] += n_refused
+        self._add_counts(n_targets, n_below, n_committed, n_quarantined, n_refused)
         if new_outcomes:
             add = self.calibrator_.add
             for y in new_outcomes:
