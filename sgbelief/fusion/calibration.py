@@ -668,26 +668,8 @@ class MondrianCalibrator:
         s, p, g = lv
         target = self._target
         n_s = s.n_fit
-        if n_s >= target and g.n_fit:  # full weight: the slice alone (log_lr inlined), kappa = 1
-            if s.stale:
-                s.fit()
-            kx, ky = s._kx, s._ky
-            i = bisect_right(kx, c)
-            if i == 0:
-                q = ky[0]
-            elif i >= len(kx):
-                q = ky[-1]
-            else:
-                x0, x1 = kx[i - 1], kx[i]
-                q = ky[i] if x1 == x0 else ky[i - 1] + (ky[i] - ky[i - 1]) * (c - x0) / (x1 - x0)
-            eps = s.eps
-            if q < eps:
-                q = eps
-            elif q > 1.0 - eps:
-                q = 1.0 - eps
-            log_lr = _log(q / (1.0 - q))
-            if self._ref:
-                log_lr -= s._log_prior_odds
+        if n_s >= target and g.n_fit:  # full weight: the slice alone, kappa = 1
+            log_lr = s.log_lr(c, self._ref)
             m = self._log_lr_max
             if log_lr > m:
                 log_lr = m
