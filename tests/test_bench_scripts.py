@@ -23,3 +23,16 @@ def test_latency_benchmark_reports_both_schedules() -> None:
     # the same horizon: a short interval folds at least what the default schedule folded
     assert short["compacted_entries"] >= default["compacted_entries"] > 0
     assert short["max_step_ratio_to_first"] > 0 and short["throughput_ratio_to_first"] > 0
+
+
+def test_ab_benchmark_compares_two_checkouts() -> None:
+    """Smoke test: the same checkout as old and new gives positive costs for both sides."""
+    root = str(BENCH.parent)
+    out = subprocess.run(
+        [sys.executable, str(BENCH / "bench_ab.py"), "--old", root, "--new", root, "--operators", "majority",
+         "--rounds", "1", "--repeat", "1", "--json"],
+        capture_output=True, text=True, check=True, timeout=300,
+    ).stdout
+    res = json.loads(out.strip().splitlines()[-1])
+    row = res["operators"]["majority"]
+    assert row["old_min"] > 1.0 and row["new_min"] > 1.0 and row["speedup"] > 0
