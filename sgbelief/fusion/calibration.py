@@ -621,24 +621,14 @@ class MondrianCalibrator:
             else:
                 conf.n_err += 1
                 conf.alpha_t = a + self._step_err
-        cs = s0.c  # the three levels (s0 is s1 for a "*" context: appended twice, as its own slice and as the pool)
-        cs.append(c)
-        s0.y.append(y)
-        s0.sc.append(score)
-        if len(cs) >= s0.refit_gap:
-            s0.refit()
-        cs = s1.c
-        cs.append(c)
-        s1.y.append(y)
-        s1.sc.append(score)
-        if len(cs) >= s1.refit_gap:
-            s1.refit()
-        cs = s2.c
-        cs.append(c)
-        s2.y.append(y)
-        s2.sc.append(score)
-        if len(cs) >= s2.refit_gap:
-            s2.refit()
+        # the three levels (s0 is s1 for a "*" context: appended twice, as its own slice and as the pool)
+        for s in (s0, s1, s2):
+            cs = s.c
+            cs.append(c)
+            s.y.append(y)
+            s.sc.append(score)
+            if len(cs) >= s.refit_gap:
+                s.refit()
 
     def refit_all(self) -> None:
         for s in self.slices.values():
