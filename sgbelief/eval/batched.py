@@ -510,6 +510,7 @@ def provenance_signature(graph: SceneGraph) -> dict[str, Any]:
     """Everything the equality tests compare, floats bit for bit and every order that is
     observable: beliefs, logs, queues, event index, timeline, compacted-id memory."""
     prov = graph.provenance
+    prov.materialize()
 
     def entry(e: ProvenanceEntry) -> Any:
         return _bits([e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by,

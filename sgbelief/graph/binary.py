@@ -516,6 +516,7 @@ def graph_to_arrays(graph: SceneGraph) -> dict[str, np.ndarray]:
 
     g = graph.nx
     prov = graph.provenance
+    prov.materialize()  # the layout stores entries, the event index and the timeline
     arrays: dict[str, np.ndarray] = {}
     # ---- nodes
     node_ids = list(g._node)

@@ -13,13 +13,24 @@ saved, loaded and migrated with the graph.
 
 The store keeps a running (alpha, beta) cache per pair so that reads are O(1); retraction and
 merges recompute the cache from the log with ``math.fsum``.
+
+Committed increments written by the operators' hot path (:meth:`ProvenanceStore.commit`) go to a
+journal of plain tuples first: the belief is updated at once, the entry object, the event index
+and the timeline are built only when something reads them (any method that returns or changes
+entries materialises the journal first, in arrival order, so every observable order is the one
+:meth:`ProvenanceStore.record` would have produced). A compaction pass folds journal records older
+than the horizon straight into the compacted buckets, so a streaming replay never builds objects
+for entries nobody looks at.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
+from bisect import bisect_left
+from collections import Counter, deque
 from collections.abc import Hashable, Iterable, Iterator
+from itertools import chain, islice
+from operator import itemgetter
 from enum import Enum
 from typing import Any
 
@@ -60,6 +71,13 @@ _QUARANTINED = EntryStatus.QUARANTINED
 #: the counted set keyed by identity (hashing a str-Enum member runs Python code)
 _COUNTED_IDS = frozenset(id(s) for s in COUNTED)
 _PENDING_IDS = frozenset(id(s) for s in PENDING)
+
+#: fields of a journal record (a committed entry not yet materialised as a ProvenanceEntry):
+#: (pair key, event id, t, d_alpha, d_beta, stance)
+JournalRecord = tuple[PairKey, "str | None", int, float, float, int]
+_rec_key = itemgetter(0)
+_rec_eid = itemgetter(1)
+_rec_t = itemgetter(2)
 
 
 class ProvenanceEntry:
@@ -171,6 +189,9 @@ class ProvenanceStore:
         self._by_event: dict[str, ProvenanceEntry | list[ProvenanceEntry]] = {}
         # every live, not-yet-compacted entry in arrival order (drives amortised compaction)
         self._timeline: deque[ProvenanceEntry] = deque()
+        # committed increments not yet materialised, in arrival order (they come after every
+        # entry of the timeline); see commit() and materialize()
+        self._journal: list[JournalRecord] = []
         self.n_compacted = 0
         # queues: pending entries in arrival order (lazy deletion) and indexed by pair
         self.quarantine: deque[ProvenanceEntry] = deque()
@@ -212,18 +233,26 @@ class ProvenanceStore:
 
     def entries(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
         """The pair's log in order (a copy of the list; entries are live objects)."""
+        if self._journal:
+            self.materialize()
         log = self._pairs.get((node, predicate))
         return list(log.entries) if log is not None else []
 
     def event_entries(self, event_id: str) -> list[ProvenanceEntry]:
         """The live entries an event recorded, in recording order."""
+        if self._journal:
+            self.materialize()
         return _event_list(self._by_event.get(event_id))
 
     def event_index(self) -> dict[str, list[ProvenanceEntry]]:
         """Every event id with live entries -> those entries (a copy, in the index's order)."""
+        if self._journal:
+            self.materialize()
         return {eid: _event_list(v) for eid, v in self._by_event.items()}
 
     def has_event(self, event_id: str) -> bool:
+        if self._journal:
+            self.materialize()
         return event_id in self._by_event
 
     def pairs(self) -> Iterator[PairKey]:
@@ -243,6 +272,8 @@ class ProvenanceStore:
 
     def count_entries(self, node: Any = None) -> int:
         """Number of original evidence entries (compacted entries count what they folded)."""
+        if self._journal:
+            self.materialize()
         total = 0
         for (n, _p), log in self._pairs.items():
             if node is not None and n != node:
@@ -252,6 +283,8 @@ class ProvenanceStore:
 
     def reconstruct(self, node: Any, predicate: str) -> tuple[float, float]:
         """Recompute (alpha, beta) from the log alone (Eq. 5), with exactly rounded sums."""
+        if self._journal:
+            self.materialize()
         log = self._pairs.get((node, predicate))
         if log is None:
             return self.prior_alpha, self.prior_beta
@@ -274,6 +307,8 @@ class ProvenanceStore:
         stance: int = 0,
     ) -> ProvenanceEntry:
         """Append an entry; counted statuses update the belief, pending ones join their queue."""
+        if self._journal:  # keep arrival order: journal records come first
+            self.materialize()
         key = (node, predicate)
         log = self._pairs.get(key)
         if log is None:
@@ -297,6 +332,47 @@ class ProvenanceStore:
                 by_event[event_id] = [prev, entry]
         self._timeline.append(entry)
         return entry
+
+    def commit(
+        self, node: Any, predicate: str, event_id: str | None, t: int, d_alpha: float, d_beta: float, stance: int = 0
+    ) -> None:
+        """Record a committed increment (``record(..., COMMITTED, stance)`` without returning the entry).
+
+        The belief changes at once (Eq. 4); the entry is journaled and materialised only when
+        something reads the log, or folded straight into its pair's compacted bucket.
+        """
+        key = (node, predicate)
+        log = self._pairs.get(key)
+        if log is None:
+            log = self._pairs[key] = _PairLog(self.prior_alpha, self.prior_beta)
+        log.alpha += d_alpha
+        log.beta += d_beta
+        self._journal.append((key, event_id, t, d_alpha, d_beta, stance))
+
+    def materialize(self) -> None:
+        """Turn the journal into entries (logs, event index, timeline), exactly as ``record`` would
+        have built them. Every method that reads or changes entries calls it first; code that
+        touches the store's private structures must call it too."""
+        journal = self._journal
+        if not journal:
+            return
+        self._journal = []
+        pairs = self._pairs
+        by_event = self._by_event
+        tl_append = self._timeline.append
+        committed = _COMMITTED
+        for key, eid, t, da, db, stance in journal:
+            entry = ProvenanceEntry(eid, t, da, db, committed, key[0], key[1], stance)
+            pairs[key].entries.append(entry)
+            if eid is not None:
+                prev = by_event.get(eid)
+                if prev is None:
+                    by_event[eid] = entry
+                elif type(prev) is list:
+                    prev.append(entry)
+                else:
+                    by_event[eid] = [prev, entry]
+            tl_append(entry)
 
     def _add_pending(self, key: PairKey, entry: ProvenanceEntry) -> None:
         (self.quarantine if entry.status is EntryStatus.QUARANTINED else self.disagreement).append(entry)
@@ -344,6 +420,8 @@ class ProvenanceStore:
         elif pending and not was_pending:
             self._add_pending((entry.node, entry.predicate), entry)
         if was_counted and not counted:
+            if self._journal:
+                self.materialize()
             self._refresh(log)
 
     def _refresh(self, log: _PairLog) -> None:
@@ -394,6 +472,8 @@ class ProvenanceStore:
         cascade is checked before anything changes, so a failed retraction leaves the store
         untouched.
         """
+        if self._journal:
+            self.materialize()
         ids = self._closure(event_id, cascade_window)
         touched: set[PairKey] = set()
         for eid in ids:
@@ -419,8 +499,10 @@ class ProvenanceStore:
 
         Pending entries are never folded. Cost is amortised O(1) per entry: only pairs that
         received entries older than the horizon are visited, in the order their oldest such
-        entry arrived (deterministic: the compacted-id memory fills in that order). Returns the
-        number of entries folded.
+        entry arrived (deterministic: the compacted-id memory fills in that order). Journal
+        records older than the horizon are folded without being materialised when that is
+        exactly what materialising them first would give (see :meth:`_old_journal`); otherwise
+        the journal is materialised first. Returns the number of entries folded.
         """
         timeline = self._timeline
         n_old = 0  # the timeline's prefix older than the horizon
@@ -428,7 +510,15 @@ class ProvenanceStore:
             if entry.t >= before_t:
                 break
             n_old += 1
-        if not n_old:
+        raws = self._old_journal(before_t, n_old == len(timeline))
+        if raws is None:  # the journal cannot be folded as it stands
+            self.materialize()
+            for entry in islice(timeline, n_old, None):
+                if entry.t >= before_t:
+                    break
+                n_old += 1
+            raws = []
+        if not n_old and not raws:
             return 0
         if n_old == len(timeline):
             old = list(timeline)
@@ -436,8 +526,22 @@ class ProvenanceStore:
         else:
             popleft = timeline.popleft
             old = [popleft() for _ in range(n_old)]
-        # pairs in the order their oldest entry past the horizon arrived
-        dirty = dict.fromkeys([(e.node, e.predicate) for e in old if e.alive])
+        # pairs in the order their oldest entry past the horizon arrived (journal records arrived
+        # after every timeline entry)
+        dirty = dict.fromkeys(chain([(e.node, e.predicate) for e in old if e.alive], map(_rec_key, raws)))
+        # the old journal records by pair, and how many of each event id are folded
+        groups: dict[PairKey, list[JournalRecord]] = {}
+        remaining: Counter[str | None] = Counter()
+        if raws:
+            group_of = groups.get
+            for rec in raws:
+                grp = group_of(rec[0])
+                if grp is None:
+                    groups[rec[0]] = [rec]
+                else:
+                    grp.append(rec)
+            remaining.update(map(_rec_eid, raws))
+            remaining.pop(None, None)  # entries without an id are never remembered
         pairs_get = self._pairs.get
         by_event = self._by_event
         gone: list[str] = []
@@ -461,20 +565,26 @@ class ProvenanceStore:
                     fold.append(entry)
                 else:
                     keep.append(entry)
-            if not fold:
+            recs = groups.get(key) if raws else None  # journal records come after every entry
+            n_fold = len(fold) + len(recs) if recs else len(fold)
+            if not n_fold:
                 continue
-            first = fold[0]
-            if len(fold) == 1:  # the common case: fsum of one value is that value
-                if id(first.status) in counted_ids:
-                    d_alpha, d_beta = first.d_alpha + 0.0, first.d_beta + 0.0
+            if n_fold == 1:  # the common case: fsum of one value is that value
+                if fold:
+                    first = fold[0]
+                    if id(first.status) in counted_ids:
+                        d_alpha, d_beta = first.d_alpha + 0.0, first.d_beta + 0.0
+                    else:
+                        d_alpha = d_beta = 0.0
+                    n, t_max = first.n_folded, first.t
                 else:
-                    d_alpha = d_beta = 0.0
-                n, t_max = first.n_folded, first.t
+                    _, _, t_max, d_alpha, d_beta, _ = recs[0]  # type: ignore[index]
+                    d_alpha, d_beta, n = d_alpha + 0.0, d_beta + 0.0, 1
             else:  # one loop, not four comprehensions (each costs a function call in CPython 3.11)
                 das: list[float] = []
                 dbs: list[float] = []
                 n = 0
-                t_max = first.t
+                t_max = fold[0].t if fold else recs[0][2]  # type: ignore[index]
                 for e in fold:
                     if id(e.status) in counted_ids:
                         das.append(e.d_alpha)
@@ -482,10 +592,17 @@ class ProvenanceStore:
                     n += e.n_folded
                     if e.t > t_max:
                         t_max = e.t
+                if recs:
+                    for rec in recs:  # committed: all counted
+                        das.append(rec[3])
+                        dbs.append(rec[4])
+                        if rec[2] > t_max:
+                            t_max = rec[2]
+                    n += len(recs)
                 d_alpha = fsum(das)
                 d_beta = fsum(dbs)
             if bucket is None:
-                bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, compacted, first.node, first.predicate)
+                bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, compacted, key[0], key[1])
                 bucket.n_folded = n
             else:
                 # = fsum((bucket, d)): one IEEE addition is correctly rounded (neither is -0.0)
@@ -510,13 +627,52 @@ class ProvenanceStore:
                         if not same_event:
                             del by_event[eid]
                             gone.append(eid)
+            if recs:  # an id is gone with the last of its records (none is in the event index)
+                for rec in recs:
+                    eid = rec[1]
+                    left = remaining[eid]  # 0 for None
+                    if left == 1:
+                        gone.append(eid)  # type: ignore[arg-type]
+                    else:
+                        remaining[eid] = left - 1
             keep.insert(0, bucket)
             log.entries = keep
-            folded_total += len(fold)
+            folded_total += n_fold
+        if raws:
+            del self._journal[: len(raws)]
         self.n_compacted += folded_total
         if gone:
             self._compacted_order.extend(gone)
         return folded_total
+
+    def _old_journal(self, before_t: int, timeline_all_old: bool) -> list[JournalRecord] | None:
+        """The journal records a compaction at ``before_t`` folds, when folding them unmaterialised
+        gives exactly what materialising them first would: they are a prefix of the journal (every
+        later record is at or past the horizon) that follows only old timeline entries; no event
+        id of the journal has an entry in the event index (so the index's order and the ids it
+        releases are unaffected); and no id of a folded record has a record left in the journal
+        (so "an id's last entry is folded" is decided by counting). None when that does not hold:
+        the caller materialises the journal first."""
+        journal = self._journal
+        if not journal:
+            return []
+        if self._by_event and not self._by_event.keys().isdisjoint(map(_rec_eid, journal)):
+            return None
+        n = bisect_left(journal, before_t, key=_rec_t) if timeline_all_old else 0
+        rest = journal[n:] if n else journal
+        if rest and min(map(_rec_t, rest)) < before_t:
+            return None
+        if not n:
+            return []
+        old = journal[:n]
+        if max(map(_rec_t, old)) >= before_t:  # bisect on a journal not in time order
+            return None
+        if rest:
+            ids = set(map(_rec_eid, old))
+            ids.discard(None)
+            if not ids.isdisjoint(map(_rec_eid, rest)):
+                return None
+        return old
 
     def _remember_compacted(self, event_id: str) -> None:
         self._compacted_order.append(event_id)
@@ -528,6 +684,8 @@ class ProvenanceStore:
     # -------------------------------------------------------- node life cycle
     def remove_node(self, node: Any) -> int:
         """Drop every log of a node (its beliefs go back to the prior). Returns entries dropped."""
+        if self._journal:
+            self.materialize()
         keys = [k for k in self._pairs if k[0] == node]
         dropped = 0
         for key in keys:
@@ -555,6 +713,8 @@ class ProvenanceStore:
         """
         if absorb == keep:
             return
+        if self._journal:
+            self.materialize()
         keys = [k for k in self._pairs if k[0] == absorb]
         for key in keys:
             src = self._pairs.pop(key)
@@ -587,6 +747,8 @@ class ProvenanceStore:
     # ---------------------------------------------------------- serialisation
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (node ids must be str or int)."""
+        if self._journal:
+            self.materialize()
         pairs = []
         for (node, predicate), log in self._pairs.items():
             pairs.append(
@@ -670,5 +832,7 @@ class ProvenanceStore:
         return store
 
     def iter_entries(self) -> Iterable[ProvenanceEntry]:
+        if self._journal:
+            self.materialize()
         for log in self._pairs.values():
             yield from log.entries

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 from sgbelief.errors import UnknownPredicateError
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, resolve_config
-from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport
+from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion import queues
 from sgbelief.graph.provenance import EntryStatus
 
@@ -149,7 +149,7 @@ class BaseOperator:
         resolutions = self.tick(graph, t) if t > graph.clock else []
         tau_t = self.config.tau_t
         prov = graph.provenance
-        record = prov.record
+        commit = prov.commit
         gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
         if not report:
             # lean path: the verdict only feeds the report, so the channel is not consulted
@@ -173,10 +173,10 @@ class BaseOperator:
                     if inc is None:
                         continue
                     da, db = inc
-                record(node, pred, eid, t, da, db, _COMMITTED, 1 if da > db else -1 if da < db else 0)
+                commit(node, pred, eid, t, da, db, 1 if da > db else -1 if da < db else 0)
                 n_committed += 1
             self._add_counts(n_targets, n_below, n_committed)
-            return UpdateReport(eid, t, pred, (), tuple(resolutions) if resolutions else ())
+            return make_report((eid, t, pred, (), tuple(resolutions) if resolutions else ()))
         increment = self._increment
         label_of = channel.label if channel is not None else None
         verdict_of = self._verdict
@@ -208,12 +208,12 @@ class BaseOperator:
                     outcomes.append(TargetOutcome(node, mass, verdict, Action.IGNORED))
                 continue
             da, db = inc
-            record(node, pred, eid, t, da, db, _COMMITTED, stance=1 if da > db else -1 if da < db else 0)
+            commit(node, pred, eid, t, da, db, 1 if da > db else -1 if da < db else 0)
             n_committed += 1
             if report:
                 outcomes.append(TargetOutcome(node, mass, verdict, Action.COMMITTED, da, db))
         self._add_counts(n_targets, n_below, n_committed)
-        return UpdateReport(eid, t, pred, tuple(outcomes), tuple(resolutions))
+        return make_report((eid, t, pred, tuple(outcomes), tuple(resolutions)))
 
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float] | None:
         """The increments (d_alpha, d_beta) of one target, or None when the rule ignores the claim."""

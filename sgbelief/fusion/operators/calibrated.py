@@ -15,7 +15,7 @@ from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.conformal import ConformalSlice, PredictionSet, no_coverage, prediction_set
 from sgbelief.fusion.operators.base import BaseOperator
-from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport
+from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.graph.provenance import EntryStatus
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -151,6 +151,11 @@ class CalibratedOperator(BaseOperator):
         tau_t, tau_rev, w0 = cfg.tau_t, cfg.tau_rev, cfg.w0
         prov = graph.provenance
         record = prov.record
+        # committed entries go to the store's journal (materialised on demand, folded by compaction
+        # without objects) unless the timeline is live: then the next refusal or quarantine would
+        # materialise the journal anyway, and recording directly is cheaper
+        direct = bool(prov._timeline)
+        commit = prov.commit
         pairs_get = prov._pairs.get
         pending_map = prov._pending_by_pair  # pairs with entries waiting in Q or Q_bot
         prior_a, prior_b = prov.prior_alpha, prov.prior_beta
@@ -234,7 +239,10 @@ class CalibratedOperator(BaseOperator):
                 if report:
                     outcomes.append(TargetOutcome(node, mass, verdict, _A_QUARANTINED, 0.0, 0.0))
             else:
-                record(node, pred, eid, t, da, db, _COMMITTED, stance)
+                if direct:
+                    record(node, pred, eid, t, da, db, _COMMITTED, stance)
+                else:
+                    commit(node, pred, eid, t, da, db, stance)
                 n_committed += 1
                 if report:
                     outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))
@@ -247,8 +255,8 @@ class CalibratedOperator(BaseOperator):
                 add(ctx, pred, c, y)
         if resolutions:
             self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
-            return UpdateReport(eid, t, pred, tuple(outcomes), tuple(resolutions))
-        return UpdateReport(eid, t, pred, tuple(outcomes) if outcomes else (), ())
+            return make_report((eid, t, pred, tuple(outcomes), tuple(resolutions)))
+        return make_report((eid, t, pred, tuple(outcomes) if outcomes else (), ()))
 
     def _pair_slice(self, predicate: str) -> ConformalSlice:
         """The pair-level conformal scores of a predicate (created on first use)."""
