@@ -132,3 +132,43 @@ def test_streaming_compaction_builds_no_entry_objects() -> None:
         assert prov.reconstruct(node, "is_p") == pytest.approx(prov.alpha_beta(node, "is_p"))
     assert not prov._journal  # reconstruct materialised it
     assert prov.is_compacted("e79") and not prov.is_compacted("e80")
+
+
+_queue_op = st.one_of(
+    st.tuples(st.just("pending"), st.sampled_from(_NODES), st.integers(0, 3),
+              st.sampled_from([EntryStatus.REFUSED, EntryStatus.QUARANTINED])),
+    st.tuples(st.just("close"), st.integers(0, 5), st.sampled_from([EntryStatus.COMMITTED, EntryStatus.RESOLVED])),
+    st.tuples(st.just("retract"), st.integers(0, 5)),
+    st.tuples(st.just("expire"), st.integers(0, 6)),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(ops=st.lists(_queue_op, max_size=30), t_cor=st.integers(0, 4), t_disagree=st.integers(0, 4))
+def test_nothing_expires_is_exact(ops: list[tuple[Any, ...]], t_cor: int, t_disagree: int) -> None:
+    """When the per-tick shortcut says nothing expires, expire() returns nothing and leaves both
+    queues (lazily deleted entries included) as they were."""
+    from sgbelief.fusion import queues
+
+    prov = SceneGraph().provenance
+    now = 0
+    for i, op in enumerate(ops):
+        if op[0] == "pending":
+            now += op[2]
+            prov.record(op[1], "is_p", f"e{i}", now, 0.5, 0.25, op[3])
+        elif op[0] in ("close", "retract"):
+            waiting = [e for e in list(prov.quarantine) + list(prov.disagreement) if e.alive and e.pending]
+            if waiting:
+                entry = waiting[op[1] % len(waiting)]
+                if op[0] == "close":
+                    prov.transition(entry, op[2])
+                else:
+                    prov.retract(entry.event_id)
+        else:
+            t = now + op[1]
+            before = (list(prov.quarantine), list(prov.disagreement))
+            if queues.nothing_expires(prov, t, t_cor=t_cor, t_disagree=t_disagree):
+                assert queues.expire(prov, t, t_cor=t_cor, k=2.0, t_disagree=t_disagree) == []
+                assert (list(prov.quarantine), list(prov.disagreement)) == before
+            else:
+                queues.expire(prov, t, t_cor=t_cor, k=2.0, t_disagree=t_disagree)

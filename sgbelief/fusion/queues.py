@@ -22,6 +22,9 @@ from sgbelief.errors import QueueError
 from sgbelief.fusion.protocol import QueueResolution
 from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore
 
+_QUARANTINED = EntryStatus.QUARANTINED
+_REFUSED = EntryStatus.REFUSED
+
 
 def quarantine_feedback(
     store: ProvenanceStore, node: Any, predicate: str, stance: int, event_id: str, t: int
@@ -70,6 +73,22 @@ def _expire(
         store.transition(entry, new, scale=scale)
         out.append(QueueResolution(entry.event_id, entry.node, entry.predicate, kind, t))
     return out
+
+
+def nothing_expires(store: ProvenanceStore, t: int, *, t_cor: int, t_disagree: int) -> bool:
+    """True when ``expire`` at time t would change nothing: each queue is empty or its head is
+    live, still pending and within its window (checked per tick, so it must be cheap)."""
+    q = store.quarantine
+    if q:
+        head = q[0]
+        if not head.alive or head.status is not _QUARANTINED or t - head.t > t_cor:
+            return False
+    d = store.disagreement
+    if d:
+        head = d[0]
+        if not head.alive or head.status is not _REFUSED or t - head.t > t_disagree:
+            return False
+    return True
 
 
 def expire(store: ProvenanceStore, t: int, *, t_cor: int, k: float, t_disagree: int) -> list[QueueResolution]:

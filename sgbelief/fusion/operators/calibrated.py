@@ -125,7 +125,10 @@ class CalibratedOperator(BaseOperator):
     # ------------------------------------------------------------- time
     def _timeouts(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
         cfg = self.config
-        out = queues.expire(graph.provenance, t, t_cor=cfg.t_cor, k=cfg.k, t_disagree=cfg.t_disagree)
+        prov = graph.provenance
+        if queues.nothing_expires(prov, t, t_cor=cfg.t_cor, t_disagree=cfg.t_disagree):
+            return []
+        out = queues.expire(prov, t, t_cor=cfg.t_cor, k=cfg.k, t_disagree=cfg.t_disagree)
         if out:
             self._count(out)
         return out
