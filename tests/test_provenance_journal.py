@@ -20,9 +20,11 @@ _NODES = ["a", "b", "c"]
 _PREDS = ["is_p", "is_q"]
 _FLOAT = st.sampled_from([0.0, 0.25, 0.5, 1.0, 0.1, 1e-9, 3.0])
 
+_commit = st.tuples(st.just("commit"), st.sampled_from(_NODES), st.sampled_from(_PREDS),
+                    st.sampled_from(["x", "y", None, "new"]), st.integers(-1, 3), _FLOAT, _FLOAT,
+                    st.sampled_from([-1, 0, 1]))
 _op = st.one_of(
-    st.tuples(st.just("commit"), st.sampled_from(_NODES), st.sampled_from(_PREDS), st.sampled_from(["x", "y", None, "new"]),
-              st.integers(-1, 3), _FLOAT, _FLOAT, st.sampled_from([-1, 0, 1])),
+    _commit,
     st.tuples(st.just("pending"), st.sampled_from(_NODES), st.sampled_from(_PREDS), st.sampled_from(["x", "new"]),
               st.integers(0, 2), _FLOAT, _FLOAT, st.sampled_from([EntryStatus.REFUSED, EntryStatus.QUARANTINED])),
     st.tuples(st.just("transition"), st.integers(0, 5),
@@ -33,6 +35,22 @@ _op = st.one_of(
     st.tuples(st.just("move"), st.sampled_from(_NODES), st.sampled_from(_NODES)),
     st.tuples(st.just("remove"), st.sampled_from(_NODES)),
 )
+
+
+#: mostly commits in time order with unique ids, and compactions: the journal-folding path
+_stream_commit = st.tuples(st.just("commit"), st.sampled_from(_NODES), st.sampled_from(_PREDS),
+                           st.sampled_from(["new", "new", "new", "x"]), st.sampled_from([0, 0, 1, 1, 2]),
+                           _FLOAT, _FLOAT, st.sampled_from([-1, 0, 1]))
+
+
+@st.composite
+def _streaming_ops(draw: st.DrawFn) -> list[tuple[Any, ...]]:
+    ops: list[tuple[Any, ...]] = draw(st.lists(_stream_commit, min_size=5, max_size=50))
+    for _ in range(draw(st.integers(1, 8))):
+        ops.insert(draw(st.integers(0, len(ops))), ("compact", draw(st.integers(0, 6))))
+    for _ in range(draw(st.integers(0, 3))):
+        ops.insert(draw(st.integers(0, len(ops))), draw(_op))
+    return ops
 
 
 def _apply(graph: SceneGraph, ops: list[tuple[Any, ...]], journaled: bool) -> list[Any]:
@@ -83,7 +101,8 @@ def _apply(graph: SceneGraph, ops: list[tuple[Any, ...]], journaled: bool) -> li
 
 
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(ops=st.lists(_op, max_size=40), remember=st.sampled_from([0, 2, 100]))
+@given(ops=st.one_of(st.lists(_op, max_size=40), _streaming_ops()),
+       remember=st.sampled_from([0, 2, 100]))
 def test_journal_is_invisible(ops: list[tuple[Any, ...]], remember: int) -> None:
     graphs = []
     results = []

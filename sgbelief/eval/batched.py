@@ -411,6 +411,7 @@ def batched_replay(
     if np.any(cols.event[1:] < cols.event[:-1]):
         raise ValueError("EventColumns entries must be in stream order (event indices non-decreasing)")
     prov = graph.provenance
+    prov.materialize()  # the logs are extended below
     a0, b0 = prov.prior_alpha, prov.prior_beta
     stats = {k: 0 for k in ("events", "targets", "committed", "refused", "quarantined", "released",
                             "corroborated", "discarded", "resolved", "expired", "below_tau_t", "compacted")}

@@ -48,6 +48,7 @@ from sgbelief.graph.provenance import (
     ProvenanceEntry,
     ProvenanceStore,
     _PairLog,
+    index_event,
 )
 from sgbelief.graph.scene_graph import SceneGraph
 
@@ -1025,13 +1026,7 @@ def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[
     if len(by_event) != len(ev):  # some event has several entries
         by_event = {}
         for eid, e in zip(ev, ents):
-            prev = by_event.get(eid)
-            if prev is None:
-                by_event[eid] = e
-            elif type(prev) is list:
-                prev.append(e)
-            else:
-                by_event[eid] = [prev, e]
+            index_event(by_event, eid, e)
     store._by_event = by_event
     store._timeline = deque(map(pick, timeline.tolist()))
     store.quarantine = deque(map(pick, queues["quarantine"].tolist()))

@@ -30,7 +30,7 @@ from bisect import bisect_left
 from collections import Counter, deque
 from collections.abc import Hashable, Iterable, Iterator
 from itertools import chain, islice
-from operator import itemgetter
+from operator import itemgetter, le
 from enum import Enum
 from typing import Any
 
@@ -153,6 +153,18 @@ def _event_list(found: ProvenanceEntry | list[ProvenanceEntry] | None) -> list[P
     return [found]  # type: ignore[list-item]
 
 
+def index_event(by_event: dict[str, Any], event_id: str, entry: ProvenanceEntry) -> None:
+    """Add an entry to the event index: the entry itself for an id's first entry, a list from its
+    second on (the id keeps its place in the dict). ``record`` does the same inline."""
+    prev = by_event.get(event_id)
+    if prev is None:
+        by_event[event_id] = entry
+    elif type(prev) is list:
+        prev.append(entry)
+    else:
+        by_event[event_id] = [prev, entry]
+
+
 class _PairLog:
     __slots__ = ("alpha", "beta", "entries")
 
@@ -192,6 +204,11 @@ class ProvenanceStore:
         # committed increments not yet materialised, in arrival order (they come after every
         # entry of the timeline); see commit() and materialize()
         self._journal: list[JournalRecord] = []
+        # how many leading journal records _check_journal() has verified, the last one's t, and
+        # each verified id's t (see _check_journal)
+        self._j_checked = 0
+        self._j_last_t: float = -math.inf
+        self._j_id_t: dict[str, int] = {}
         self.n_compacted = 0
         # queues: pending entries in arrival order (lazy deletion) and indexed by pair
         self.quarantine: deque[ProvenanceEntry] = deque()
@@ -357,6 +374,8 @@ class ProvenanceStore:
         if not journal:
             return
         self._journal = []
+        self._j_checked, self._j_last_t = 0, -math.inf
+        self._j_id_t.clear()
         pairs = self._pairs
         by_event = self._by_event
         tl_append = self._timeline.append
@@ -365,13 +384,7 @@ class ProvenanceStore:
             entry = ProvenanceEntry(eid, t, da, db, committed, key[0], key[1], stance)
             pairs[key].entries.append(entry)
             if eid is not None:
-                prev = by_event.get(eid)
-                if prev is None:
-                    by_event[eid] = entry
-                elif type(prev) is list:
-                    prev.append(entry)
-                else:
-                    by_event[eid] = [prev, entry]
+                index_event(by_event, eid, entry)
             tl_append(entry)
 
     def _add_pending(self, key: PairKey, entry: ProvenanceEntry) -> None:
@@ -544,6 +557,7 @@ class ProvenanceStore:
             remaining.pop(None, None)  # entries without an id are never remembered
         pairs_get = self._pairs.get
         by_event = self._by_event
+        id_t = self._j_id_t
         gone: list[str] = []
         folded_total = 0
         refused, quarantined, compacted = _REFUSED, _QUARANTINED, _COMPACTED
@@ -633,6 +647,7 @@ class ProvenanceStore:
                     left = remaining[eid]  # 0 for None
                     if left == 1:
                         gone.append(eid)  # type: ignore[arg-type]
+                        del id_t[eid]  # type: ignore[arg-type]
                     else:
                         remaining[eid] = left - 1
             keep.insert(0, bucket)
@@ -640,6 +655,7 @@ class ProvenanceStore:
             folded_total += n_fold
         if raws:
             del self._journal[: len(raws)]
+            self._j_checked -= len(raws)
         self.n_compacted += folded_total
         if gone:
             self._compacted_order.extend(gone)
@@ -647,32 +663,50 @@ class ProvenanceStore:
 
     def _old_journal(self, before_t: int, timeline_all_old: bool) -> list[JournalRecord] | None:
         """The journal records a compaction at ``before_t`` folds, when folding them unmaterialised
-        gives exactly what materialising them first would: they are a prefix of the journal (every
-        later record is at or past the horizon) that follows only old timeline entries; no event
-        id of the journal has an entry in the event index (so the index's order and the ids it
-        releases are unaffected); and no id of a folded record has a record left in the journal
-        (so "an id's last entry is folded" is decided by counting). None when that does not hold:
-        the caller materialises the journal first."""
+        gives exactly what materialising them first would, else None (the caller materialises).
+
+        Exact when (_check_journal) the journal is in time order, no journaled id is in the event
+        index, and no id occurs at two times: then the old records are a prefix (found by
+        bisection), every id they hold has all its live entries among them (so "an id's last entry
+        is folded" is a count), and the index's order is untouched. They may fold only after an
+        entirely old timeline (arrival order); otherwise the journal must be entirely young.
+        """
         journal = self._journal
         if not journal:
             return []
-        if self._by_event and not self._by_event.keys().isdisjoint(map(_rec_eid, journal)):
+        if not self._check_journal():
             return None
-        n = bisect_left(journal, before_t, key=_rec_t) if timeline_all_old else 0
-        rest = journal[n:] if n else journal
-        if rest and min(map(_rec_t, rest)) < before_t:
-            return None
-        if not n:
-            return []
-        old = journal[:n]
-        if max(map(_rec_t, old)) >= before_t:  # bisect on a journal not in time order
-            return None
-        if rest:
-            ids = set(map(_rec_eid, old))
-            ids.discard(None)
-            if not ids.isdisjoint(map(_rec_eid, rest)):
-                return None
-        return old
+        if not timeline_all_old:
+            return [] if journal[0][2] >= before_t else None
+        n = bisect_left(journal, before_t, key=_rec_t)
+        return journal[:n] if n else []
+
+    def _check_journal(self) -> bool:
+        """Extend the verified prefix of the journal to all of it (each record is checked once:
+        the event index only gains ids when the journal is materialised, which resets this)."""
+        journal = self._journal
+        k = self._j_checked
+        if k == len(journal):
+            return True
+        new = journal[k:]
+        ts = list(map(_rec_t, new))
+        if ts[0] < self._j_last_t or not all(map(le, ts, islice(ts, 1, None))):
+            return False  # not in time order
+        ids = list(map(_rec_eid, new))
+        chunk = dict(zip(ids, ts))
+        if len(chunk) != len(set(zip(ids, ts))):
+            return False  # an id at two times
+        chunk.pop(None, None)  # type: ignore[call-overload]
+        if self._by_event and not self._by_event.keys().isdisjoint(chunk):
+            return False
+        seen = self._j_id_t
+        for eid in seen.keys() & chunk.keys():
+            if seen[eid] != chunk[eid]:
+                return False
+        seen.update(chunk)  # type: ignore[arg-type]
+        self._j_checked = len(journal)
+        self._j_last_t = ts[-1]
+        return True
 
     def _remember_compacted(self, event_id: str) -> None:
         self._compacted_order.append(event_id)
