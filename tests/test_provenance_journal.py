@@ -191,3 +191,19 @@ def test_nothing_expires_is_exact(ops: list[tuple[Any, ...]], t_cor: int, t_disa
                 assert (list(prov.quarantine), list(prov.disagreement)) == before
             else:
                 queues.expire(prov, t, t_cor=t_cor, k=2.0, t_disagree=t_disagree)
+
+
+def test_long_stream_with_a_reused_id_matches_record() -> None:
+    """Thousands of journaled ids (the id memory is pruned) and an old id reused late."""
+    ops: list[tuple[Any, ...]] = []
+    for i in range(3000):
+        ops.append(("commit", _NODES[i % 3], _PREDS[i % 2], "new", 1 if i % 2 else 0, 0.25, 0.5, 1))
+        if i % 97 == 0:
+            ops.append(("compact", 40))
+        if i == 2500:
+            ops.append(("commit", "a", "is_p", "e3", 0, 0.5, 0.5, 0))  # e3 was folded long ago
+    ops.append(("compact", 5))
+    graphs = [SceneGraph(), SceneGraph()]
+    results = [_apply(graphs[0], ops, True), _apply(graphs[1], ops, False)]
+    assert results[0] == results[1]
+    assert provenance_signature(graphs[0]) == provenance_signature(graphs[1])

@@ -30,7 +30,7 @@ from bisect import bisect_left
 from collections import Counter, deque
 from collections.abc import Hashable, Iterable, Iterator
 from itertools import chain, islice
-from operator import itemgetter, le
+from operator import eq, itemgetter, le
 from enum import Enum
 from typing import Any
 
@@ -557,7 +557,6 @@ class ProvenanceStore:
             remaining.pop(None, None)  # entries without an id are never remembered
         pairs_get = self._pairs.get
         by_event = self._by_event
-        id_t = self._j_id_t
         gone: list[str] = []
         folded_total = 0
         refused, quarantined, compacted = _REFUSED, _QUARANTINED, _COMPACTED
@@ -647,15 +646,19 @@ class ProvenanceStore:
                     left = remaining[eid]  # 0 for None
                     if left == 1:
                         gone.append(eid)  # type: ignore[arg-type]
-                        del id_t[eid]  # type: ignore[arg-type]
                     else:
                         remaining[eid] = left - 1
             keep.insert(0, bucket)
             log.entries = keep
             folded_total += n_fold
         if raws:
-            del self._journal[: len(raws)]
+            journal = self._journal
+            del journal[: len(raws)]
             self._j_checked -= len(raws)
+            if len(self._j_id_t) > 2 * len(journal) + 1024:  # drop the folded ids, in one C pass
+                # (until then a folded id reused later only costs a materialisation)
+                id_t = self._j_id_t = dict(zip(map(_rec_eid, journal), map(_rec_t, journal)))
+                id_t.pop(None, None)  # type: ignore[call-overload]
         self.n_compacted += folded_total
         if gone:
             self._compacted_order.extend(gone)
@@ -693,8 +696,8 @@ class ProvenanceStore:
         if ts[0] < self._j_last_t or not all(map(le, ts, islice(ts, 1, None))):
             return False  # not in time order
         ids = list(map(_rec_eid, new))
-        chunk = dict(zip(ids, ts))
-        if len(chunk) != len(set(zip(ids, ts))):
+        chunk = dict(zip(ids, ts))  # each id's last t
+        if not all(map(eq, map(chunk.__getitem__, ids), ts)):
             return False  # an id at two times
         chunk.pop(None, None)  # type: ignore[call-overload]
         if self._by_event and not self._by_event.keys().isdisjoint(chunk):
