@@ -9,7 +9,6 @@ from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, resolve_config
 from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion import queues
-from sgbelief.graph.provenance import EntryStatus
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
@@ -19,7 +18,6 @@ if TYPE_CHECKING:  # pragma: no cover
 _NO_CLAIM = Verdict.NO_CLAIM
 _CORR = Verdict.CORROBORATES
 _CONTRA = Verdict.CONTRADICTS
-_COMMITTED = EntryStatus.COMMITTED
 
 
 class BaseOperator:
