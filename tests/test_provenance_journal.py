@@ -207,3 +207,26 @@ def test_long_stream_with_a_reused_id_matches_record() -> None:
     results = [_apply(graphs[0], ops, True), _apply(graphs[1], ops, False)]
     assert results[0] == results[1]
     assert provenance_signature(graphs[0]) == provenance_signature(graphs[1])
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(before=st.one_of(st.lists(_op, max_size=30), _streaming_ops()),
+       after=st.one_of(st.lists(_op, max_size=30), _streaming_ops()))
+def test_deferred_load_is_invisible(tmp_path_factory: pytest.TempPathFactory, before: list[tuple[Any, ...]],
+                                    after: list[tuple[Any, ...]]) -> None:
+    """A binary load defers its settled entries: the same operations on the deferred store and on
+    one materialised right after loading return the same and leave the same store."""
+    g = SceneGraph()
+    g.provenance.remember_compacted = 5
+    _apply(g, before, journaled=True)
+    for node in _NODES:
+        if node not in g.nx:
+            g.add_node(node)
+    path = g.save(tmp_path_factory.mktemp("deferred") / "g.npz")
+    eager, lazy = SceneGraph.load(path), SceneGraph.load(path)
+    eager.provenance.materialize()
+    assert lazy.provenance.deferred == (eager.provenance.count_entries() > 0)
+    assert _apply(lazy, after, journaled=True) == _apply(eager, after, journaled=True)
+    assert provenance_signature(lazy) == provenance_signature(eager)
+    assert lazy.provenance.to_dict() == eager.provenance.to_dict()
+    assert not lazy.provenance.deferred

@@ -30,7 +30,8 @@ import zlib
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
-from itertools import chain, repeat
+from functools import partial
+from itertools import chain, islice, repeat
 from operator import attrgetter, is_, is_not, itemgetter
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -90,6 +91,13 @@ def _encode_strings(values: list[str] | tuple[str, ...], where: Callable[[int], 
 def _decode_strings(data: np.ndarray, lengths: np.ndarray | None, rows: int, err: Callable[[str], FormatError]
                     ) -> list[str]:
     """Inverse of :func:`_encode_strings`; checks the text is UTF-8 and holds exactly ``rows`` strings."""
+    return _checked_strings(data, lengths, rows, err)()
+
+
+def _checked_strings(data: np.ndarray, lengths: np.ndarray | None, rows: int, err: Callable[[str], FormatError]
+                     ) -> Callable[[], list[str]]:
+    """:func:`_decode_strings` with the split left to the caller: every check is made now, the
+    returned callable (picklable) makes the list of strings."""
     raw = data.tobytes()
     try:
         text = raw.decode("utf-8", "surrogatepass")
@@ -98,24 +106,30 @@ def _decode_strings(data: np.ndarray, lengths: np.ndarray | None, rows: int, err
     if rows == 0:
         if raw:
             raise err("text must be empty when there are no strings")
-        return []
+        return list
     if lengths is None:
         if text.count(_SEP) != rows - 1:
             raise err(f"expected {rows} NUL-separated strings, found {text.count(_SEP) + 1}")
-        return text.split(_SEP)
+        return partial(str.split, text, _SEP)
     if int(lengths.min()) < 0 or int(lengths.max()) > len(raw):
         raise err("string lengths out of range")
     ends = np.cumsum(lengths + 1) - 1  # separator after each string; the last "separator" is the end
     if int(ends[-1]) != len(raw) or any(raw[e] != 0 for e in ends[:-1].tolist()):
         raise err("string lengths do not match the NUL separators in the text")
-    return [raw[a:b].decode("utf-8", "surrogatepass") for a, b in zip((ends - lengths).tolist(), ends.tolist())]
+    values = [raw[a:b].decode("utf-8", "surrogatepass") for a, b in zip((ends - lengths).tolist(), ends.tolist())]
+    return partial(list, values)
 
 
 def _read_strings(arch: _Archive, name: str, rows: int) -> list[str]:
     """A string column: ``<name>.text`` and, when present, ``<name>.lengths``."""
+    return _read_strings_later(arch, name, rows)()
+
+
+def _read_strings_later(arch: _Archive, name: str, rows: int) -> Callable[[], list[str]]:
+    """:func:`_read_strings`, checked now, split when the returned callable is called."""
     data = arch.read(name + ".text", _U1, (None,))
     lengths = arch.read(name + ".lengths", _I8, (rows,)) if arch.has(name + ".lengths") else None
-    return _decode_strings(data, lengths, rows, lambda msg: arch.error(f"array '{name}.text': {msg}"))
+    return _checked_strings(data, lengths, rows, lambda msg: arch.error(f"array '{name}.text': {msg}"))
 
 
 # ================================================================ value columns
@@ -892,7 +906,7 @@ def _load(arch: _Archive) -> SceneGraph:
     if m and int(n_folded.min()) < 1:
         raise arch.error("array 'entry_n_folded': every entry stands for at least 1 original entry")
     null = arch.read("entry_event_null", _B1, (m,))
-    eids: list[Any] = _decode_values(arch, "entry_event", {"kind": "str"}, m)
+    eids = _read_strings_later(arch, "entry_event", m)  # split when the entries are built
     corr_entry = arch.read("corroborated_entry", _I8, (c.corroborated,))
     _check_index(arch, "corroborated_entry", corr_entry, m)
     if len(corr_entry) > 1 and not (np.diff(corr_entry) > 0).all():
@@ -989,53 +1003,104 @@ def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[
                  pair_nodes: np.ndarray, pair_preds: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
                  lengths: np.ndarray,
                  offsets: np.ndarray, t: np.ndarray, da: np.ndarray, db: np.ndarray, status: np.ndarray,
-                 stance: np.ndarray, n_folded: np.ndarray, null: np.ndarray, eids: list[Any],
+                 stance: np.ndarray, n_folded: np.ndarray, null: np.ndarray, eids: Callable[[], list[str]],
                  corr_entry: np.ndarray, corr_len: np.ndarray, corr_ids: list[str], timeline: np.ndarray,
                  queues: dict[str, np.ndarray], compacted: list[str]) -> ProvenanceStore:
-    """The ProvenanceStore with every index the streaming store keeps, from validated columns."""
+    """The ProvenanceStore from validated columns: beliefs, queues and pending entries now, the
+    other entries, the event index and the timeline on first read (:class:`_LoadedEntries`)."""
     store = ProvenanceStore((h.prior[0], h.prior[1]), remember_compacted=h.remember_compacted)
-    m = len(t)
-    status_arr = np.empty(len(statuses), dtype=object)
-    for i, s in enumerate(statuses):
-        status_arr[i] = s
-    eid_arr = np.fromiter(eids, object, m)
-    if null.any():
-        eid_arr[null] = None
-    entries = list(map(ProvenanceEntry, eid_arr.tolist(), _pylist(t), _pylist(da), _pylist(db),
-                       status_arr[status].tolist(), np.repeat(pair_nodes, lengths).tolist(),
-                       np.repeat(pair_preds, lengths).tolist(), stance.tolist()))
-    pick = entries.__getitem__
-    folded = np.flatnonzero(n_folded != 1)
-    set_folded = ProvenanceEntry.n_folded.__set__  # type: ignore[attr-defined]
-    deque(map(set_folded, map(pick, folded.tolist()), n_folded[folded].tolist()), maxlen=0)
-    if len(corr_entry):
-        bounds = np.zeros(len(corr_len) + 1, dtype=_I8)
-        np.cumsum(corr_len, out=bounds[1:])
-        for i, a, b in zip(corr_entry.tolist(), bounds[:-1].tolist(), bounds[1:].tolist()):
-            entries[i].corroborated_by = corr_ids[a:b]
-    logs = list(map(_PairLog, _pylist(alpha), _pylist(beta)))
-    set_entries = _PairLog.entries.__set__  # type: ignore[attr-defined]
-    deque(map(set_entries, logs, _split(entries, offsets, lengths)), maxlen=0)
-    store._pairs = dict(zip(pair_keys, logs))
-    # event index: each event's entries in log order
-    named = np.flatnonzero(~null)
-    ev = eid_arr[named].tolist()
-    ents = list(map(pick, named.tolist()))
-    # (an id with one entry maps to the entry itself, as ProvenanceStore.record builds it)
-    by_event: dict[str, Any] = dict(zip(ev, ents))
-    if len(by_event) != len(ev):  # some event has several entries
-        by_event = {}
-        for eid, e in zip(ev, ents):
-            index_event(by_event, eid, e)
-    store._by_event = by_event
-    store._timeline = deque(map(pick, timeline.tolist()))
+    store._pairs = dict(zip(pair_keys, map(_PairLog, _pylist(alpha), _pylist(beta))))
+    loaded = _LoadedEntries(statuses, pair_nodes, pair_preds, lengths, offsets, t, da, db, status, stance,
+                            n_folded, null, eids, corr_entry, corr_len, corr_ids, timeline)
+    # the pending entries exist at once: the queues hold them (transitions act on these objects)
+    pending = np.flatnonzero(np.isin(status, [i for i, s in enumerate(statuses) if s in PENDING]))
+    built = dict(zip(pending.tolist(), loaded.entries(pending)))
+    pick = built.__getitem__
     store.quarantine = deque(map(pick, queues["quarantine"].tolist()))
     store.disagreement = deque(map(pick, queues["disagreement"].tolist()))
     # per-pair pending lists in time order (stable), as the JSON loader builds them
-    pending = np.flatnonzero(np.isin(status, [i for i, s in enumerate(statuses) if s in PENDING]))
     by_pair = store._pending_by_pair
     for e in map(pick, pending[np.argsort(t[pending], kind="stable")].tolist()):
         by_pair.setdefault((e.node, e.predicate), []).append(e)
+    loaded.pending = built
     store._compacted_order.extend(compacted)  # bounded by remember_compacted: keeps the newest
     store.n_compacted = h.n_compacted
+    if len(t):
+        store.defer_entries(loaded)
     return store
+
+
+class _LoadedEntries:
+    """The validated entry columns of a load; :meth:`build` makes what the streaming store keeps
+    (entry objects in each pair's log, the event index, the timeline), exactly as an eager load
+    would, reusing the pending entries made at load time (:class:`~sgbelief.graph.provenance.DeferredEntries`)."""
+
+    def __init__(self, statuses: list[EntryStatus], pair_nodes: np.ndarray, pair_preds: np.ndarray,
+                 lengths: np.ndarray, offsets: np.ndarray, t: np.ndarray, da: np.ndarray, db: np.ndarray,
+                 status: np.ndarray, stance: np.ndarray, n_folded: np.ndarray, null: np.ndarray,
+                 eids: Callable[[], list[str]], corr_entry: np.ndarray, corr_len: np.ndarray, corr_ids: list[str],
+                 timeline: np.ndarray) -> None:
+        self.status_arr = np.empty(len(statuses), dtype=object)
+        for i, s in enumerate(statuses):
+            self.status_arr[i] = s
+        self.pair_nodes, self.pair_preds, self.lengths, self.offsets = pair_nodes, pair_preds, lengths, offsets
+        self.t, self.da, self.db, self.status, self.stance, self.n_folded = t, da, db, status, stance, n_folded
+        self.null, self._eids, self._eid_arr = null, eids, None
+        self.corr_entry, self.corr_len, self.corr_ids, self.timeline = corr_entry, corr_len, corr_ids, timeline
+        #: entry index -> the entry already made (the pending ones)
+        self.pending: dict[int, ProvenanceEntry] = {}
+
+    def eid_array(self) -> np.ndarray:
+        """Each entry's event id (None where the file says null), as an object array."""
+        if self._eid_arr is None:
+            arr = np.fromiter(self._eids(), object, len(self.t))
+            if self.null.any():
+                arr[self.null] = None
+            self._eid_arr = arr
+        return self._eid_arr
+
+    def entries(self, rows: np.ndarray | None = None) -> list[ProvenanceEntry]:
+        """New entry objects for the given entry indices (all when None), in that order."""
+        pick = (lambda a: a) if rows is None else (lambda a: a[rows])  # noqa: E731
+        pair_of = np.repeat(np.arange(len(self.lengths)), self.lengths)
+        pairs = pick(pair_of)
+        entries = list(map(ProvenanceEntry, pick(self.eid_array()).tolist(), _pylist(pick(self.t)),
+                           _pylist(pick(self.da)), _pylist(pick(self.db)), self.status_arr[pick(self.status)].tolist(),
+                           self.pair_nodes[pairs].tolist(), self.pair_preds[pairs].tolist(), pick(self.stance).tolist()))
+        n_folded = pick(self.n_folded)
+        folded = np.flatnonzero(n_folded != 1)
+        at = entries.__getitem__
+        set_folded = ProvenanceEntry.n_folded.__set__  # type: ignore[attr-defined]
+        deque(map(set_folded, map(at, folded.tolist()), n_folded[folded].tolist()), maxlen=0)
+        if len(self.corr_entry):
+            bounds = np.zeros(len(self.corr_len) + 1, dtype=_I8)
+            np.cumsum(self.corr_len, out=bounds[1:])
+            where = np.arange(len(self.t)) if rows is None else np.full(len(self.t), -1, dtype=_I8)
+            if rows is not None:
+                where[rows] = np.arange(len(rows))
+            for i, a, b in zip(where[self.corr_entry].tolist(), bounds[:-1].tolist(), bounds[1:].tolist()):
+                if i >= 0:
+                    entries[i].corroborated_by = self.corr_ids[a:b]
+        return entries
+
+    def build(self, store: ProvenanceStore) -> None:
+        entries = self.entries()
+        for i, e in self.pending.items():  # the objects the queues hold
+            entries[i] = e
+        pick = entries.__getitem__
+        # the loaded pairs come first in the store (pairs are only removed after materialising)
+        logs = list(islice(store._pairs.values(), len(self.lengths)))
+        set_entries = _PairLog.entries.__set__  # type: ignore[attr-defined]
+        deque(map(set_entries, logs, _split(entries, self.offsets, self.lengths)), maxlen=0)
+        # event index: each event's entries in log order
+        named = np.flatnonzero(~self.null)
+        ev = self.eid_array()[named].tolist()
+        ents = list(map(pick, named.tolist()))
+        # (an id with one entry maps to the entry itself, as ProvenanceStore.record builds it)
+        by_event: dict[str, Any] = dict(zip(ev, ents))
+        if len(by_event) != len(ev):  # some event has several entries
+            by_event = {}
+            for eid, e in zip(ev, ents):
+                index_event(by_event, eid, e)
+        store._by_event = by_event
+        store._timeline.extend(map(pick, self.timeline.tolist()))

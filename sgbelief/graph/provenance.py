@@ -21,6 +21,11 @@ entries materialises the journal first, in arrival order, so every observable or
 :meth:`ProvenanceStore.record` would have produced). A compaction pass folds journal records older
 than the horizon straight into the compacted buckets, so a streaming replay never builds objects
 for entries nobody looks at.
+
+A store loaded from the binary layout defers its settled entries the same way
+(:meth:`ProvenanceStore.defer_entries`): the beliefs, the pending queues and their entries exist at
+once, the other entry objects, the event index and the timeline are built by the first
+materialisation, before any journal record.
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ from collections.abc import Hashable, Iterable, Iterator
 from itertools import chain, islice
 from operator import eq, itemgetter, le
 from enum import Enum
-from typing import Any
+from typing import Any, Protocol
 
 from sgbelief.errors import FormatError, RetractionError
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA, BetaBelief
@@ -75,6 +80,9 @@ _PENDING_IDS = frozenset(id(s) for s in PENDING)
 #: fields of a journal record (a committed entry not yet materialised as a ProvenanceEntry):
 #: (pair key, event id, t, d_alpha, d_beta, stance)
 JournalRecord = tuple[PairKey, "str | None", int, float, float, int]
+#: the journal's first record while a loader's entries are deferred (see defer_entries): every
+#: reader that materialises a non-empty journal then builds them first
+_DEFERRED: JournalRecord = ((None, ""), None, -1, 0.0, 0.0, 0)
 _rec_key = itemgetter(0)
 _rec_eid = itemgetter(1)
 _rec_t = itemgetter(2)
@@ -174,6 +182,13 @@ class _PairLog:
         self.entries: list[ProvenanceEntry] = []
 
 
+class DeferredEntries(Protocol):
+    """Entries a loader builds on demand (see :meth:`ProvenanceStore.defer_entries`)."""
+
+    def build(self, store: ProvenanceStore) -> None:
+        """Fill the loaded pairs' entry lists, the event index and the timeline of ``store``."""
+
+
 class ProvenanceStore:
     """Per-(node, predicate) ordered logs of belief increments, with retraction and compaction.
 
@@ -209,6 +224,8 @@ class ProvenanceStore:
         self._j_checked = 0
         self._j_last_t: float = -math.inf
         self._j_id_t: dict[str, int] = {}
+        # entries a loader has not built yet (then _journal[0] is _DEFERRED); see defer_entries()
+        self._deferred: DeferredEntries | None = None
         self.n_compacted = 0
         # queues: pending entries in arrival order (lazy deletion) and indexed by pair
         self.quarantine: deque[ProvenanceEntry] = deque()
@@ -376,6 +393,11 @@ class ProvenanceStore:
         self._journal = []
         self._j_checked, self._j_last_t = 0, -math.inf
         self._j_id_t.clear()
+        if journal[0] is _DEFERRED:  # a loader's entries come before every journal record
+            deferred, self._deferred = self._deferred, None
+            assert deferred is not None
+            deferred.build(self)
+            del journal[0]
         pairs = self._pairs
         by_event = self._by_event
         tl_append = self._timeline.append
@@ -386,6 +408,26 @@ class ProvenanceStore:
             if eid is not None:
                 index_event(by_event, eid, entry)
             tl_append(entry)
+
+    def defer_entries(self, deferred: DeferredEntries) -> None:
+        """Let ``deferred.build(store)`` make the loaded entries on the first materialisation.
+
+        For loaders: the store must already hold every loaded pair (its running belief, an
+        empty entry list), the pending queues with their entries, and nothing else; the
+        journal must be empty. ``build`` then fills, in one pass, what an eager load would have:
+        each loaded pair's entry list, the event index and the timeline, reusing the pending
+        entry objects. Status transitions of pending entries meanwhile act on those objects, and
+        commits are journaled after the marker, so the result is the eager load followed by the
+        same operations."""
+        if self._journal or self._deferred is not None or self._by_event or self._timeline:
+            raise ValueError("defer_entries needs a freshly loaded store (no journal, index or timeline)")
+        self._deferred = deferred
+        self._journal.append(_DEFERRED)
+
+    @property
+    def deferred(self) -> bool:
+        """Whether loaded entries are still to be built (by the first read of the logs)."""
+        return self._deferred is not None
 
     def _add_pending(self, key: PairKey, entry: ProvenanceEntry) -> None:
         (self.quarantine if entry.status is EntryStatus.QUARANTINED else self.disagreement).append(entry)
@@ -677,7 +719,7 @@ class ProvenanceStore:
         journal = self._journal
         if not journal:
             return []
-        if not self._check_journal():
+        if journal[0] is _DEFERRED or not self._check_journal():
             return None
         if not timeline_all_old:
             return [] if journal[0][2] >= before_t else None
