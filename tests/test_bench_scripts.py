@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -36,3 +37,18 @@ def test_ab_benchmark_compares_two_checkouts() -> None:
     res = json.loads(out.strip().splitlines()[-1])
     row = res["operators"]["majority"]
     assert row["old_min"] > 1.0 and row["new_min"] > 1.0 and row["speedup"] > 0
+
+
+def test_large_map_benchmark_round_trips_and_reports_every_step(tmp_path: Path) -> None:
+    """Smoke test: both formats round-trip (``--verify``), the load is deferred and then
+    materialised, and the object floor and every named query are reported."""
+    out = subprocess.run(
+        [sys.executable, str(BENCH / "bench_large_map.py"), "--nodes", "3000", "--verify", "--json"],
+        capture_output=True, text=True, check=True, timeout=300, env={**os.environ, "BENCH_TMP": str(tmp_path)},
+    ).stdout
+    res = json.loads(out.strip().splitlines()[-1])
+    assert res["verified_equal"] is True and res["npz_load_deferred"] is True
+    assert res["log_entries"] > 0 and res["named_queries"] == len(res["query_s"]) > 0
+    for step in ("npz_save", "npz_load", "objects_floor", "npz_materialize", "json_save", "json_load"):
+        assert res[f"{step}_s"] >= 0
+    assert res["npz_load_materialized_json_equiv_mb_per_s"] > 0 and res["objects_floor_json_equiv_mb_per_s"] > 0

@@ -476,30 +476,47 @@ class _Header(BaseModel):
 
 
 # ======================================================================== saving
+def _by_address(objs: Iterable[Any], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(sorted addresses, row of each) of ``n`` objects."""
+    ids = np.fromiter(map(id, objs), np.uint64, n)
+    order = np.argsort(ids)
+    return ids[order], order
+
+
+def _match(sorted_ids: np.ndarray, order: np.ndarray, objs: Iterable[Any], n: int) -> np.ndarray:
+    """Row of each object found (by address) among the sorted ones, -1 where none is."""
+    vid = np.fromiter(map(id, objs), np.uint64, n)
+    pos = np.minimum(np.searchsorted(sorted_ids, vid), len(sorted_ids) - 1)
+    hit = sorted_ids[pos] == vid
+    return np.where(hit, order[pos], -1).astype(_I8)
+
+
 class _NodeIndex:
-    """Row of a node in the saved node table: each value is looked up in the graph's own node dict
-    (no second hash table over 10⁶ ids) and the attribute dict found there is mapped to its row by
-    address (sorted addresses + searchsorted)."""
+    """Row of a node in the saved node table, with no second hash table over 10⁶ ids. A value
+    that *is* one of the node dict's key objects (pairs and edges usually hold those) is found by
+    its address alone; any other is looked up in the graph's own node dict and the attribute dict
+    found there is mapped to its row by address (sorted addresses + searchsorted)."""
 
     def __init__(self, node_dict: dict[Any, dict[str, Any]]) -> None:
         self.node_dict = node_dict
-        self._sorted: tuple[np.ndarray, np.ndarray] | None = None
+        self._keys: tuple[np.ndarray, np.ndarray] | None = None
+        self._dicts: tuple[np.ndarray, np.ndarray] | None = None
 
     def rows(self, values: list[Any] | tuple[Any, ...]) -> np.ndarray:
         """Row of each value; -1 for values that are not nodes of the graph."""
-        out = np.full(len(values), -1, dtype=_I8)
-        if not values or not self.node_dict:
-            return out
-        if self._sorted is None:
-            ids = np.fromiter(map(id, self.node_dict.values()), np.uint64, len(self.node_dict))
-            order = np.argsort(ids)
-            self._sorted = ids[order], order
-        sid, order = self._sorted
-        missing: dict[str, Any] = {}  # never one of the graph's attribute dicts
-        vid = np.fromiter(map(id, map(self.node_dict.get, values, repeat(missing))), np.uint64, len(values))
-        pos = np.minimum(np.searchsorted(sid, vid), len(sid) - 1)
-        hit = sid[pos] == vid
-        out[hit] = order[pos[hit]]
+        nd = self.node_dict
+        if not values or not nd:
+            return np.full(len(values), -1, dtype=_I8)
+        if self._keys is None:
+            self._keys = _by_address(nd, len(nd))
+        out = _match(*self._keys, values, len(values))
+        miss = np.flatnonzero(out < 0)
+        if len(miss):  # equal but distinct objects (or not nodes): through the node dict
+            if self._dicts is None:
+                self._dicts = _by_address(nd.values(), len(nd))
+            missing: dict[str, Any] = {}  # never one of the graph's attribute dicts
+            others = [values[i] for i in miss.tolist()]
+            out[miss] = _match(*self._dicts, map(nd.get, others, repeat(missing)), len(others))
         return out
 
 
@@ -1084,6 +1101,10 @@ class _LoadedEntries:
         return entries
 
     def build(self, store: ProvenanceStore) -> None:
+        with _young_collections_only():  # ~10⁶ long-lived objects, as in the load itself
+            self._build(store)
+
+    def _build(self, store: ProvenanceStore) -> None:
         entries = self.entries()
         for i, e in self.pending.items():  # the objects the queues hold
             entries[i] = e
