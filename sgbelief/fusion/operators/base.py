@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 from sgbelief.errors import UnknownPredicateError
@@ -92,12 +93,12 @@ class BaseOperator:
     def _timeouts(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
         return []
 
-    def _add_counts(
-        self, n_targets: int, n_below: int, n_committed: int, n_quarantined: int = 0, n_refused: int = 0
+    def _add_totals(
+        self, n_events: int, n_targets: int, n_below: int, n_committed: int, n_quarantined: int = 0, n_refused: int = 0
     ) -> None:
-        """Count one event and what happened to its targets."""
+        """Count events and what happened to their targets."""
         stats = self.stats
-        stats["events"] += 1
+        stats["events"] += n_events
         stats["targets"] += n_targets
         if n_below:
             stats["below_tau_t"] += n_below
@@ -140,41 +141,17 @@ class BaseOperator:
         ``report=False`` skips building the per-target outcomes (the returned report has
         ``targets == ()``); the map, provenance and stats are the same either way.
         """
+        if not report:
+            res = self.update_many(graph, ((event, channel),))
+            return make_report((event.id, event.t, event.predicate, (), tuple(res) if res else ()))
         pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
         vocab = graph.vocabulary
         if vocab is not None and pred not in vocab:
             raise UnknownPredicateError(pred, vocab)
         resolutions = self.tick(graph, t) if t > graph.clock else []
         tau_t = self.config.tau_t
-        prov = graph.provenance
-        commit = prov.commit
+        commit = graph.provenance.commit
         gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
-        if not report:
-            # lean path: the verdict only feeds the report, so the channel is not consulted
-            n_targets = n_below = n_committed = 0
-            split = self._split(c) if self._linear else None
-            if split is not None:  # a linear rule: d_alpha = T p, d_beta = T q for every target
-                p, q = split
-            increment = self._increment
-            for node, mass in event.targets.items():
-                n_targets += 1
-                if mass <= tau_t:
-                    n_below += 1
-                    continue
-                if node not in gnx:
-                    graph.ensure_node(node)
-                if split is not None:
-                    da = mass * p
-                    db = mass * q
-                else:
-                    inc = increment(graph, node, pred, c, mass)
-                    if inc is None:
-                        continue
-                    da, db = inc
-                commit(node, pred, eid, t, da, db, 1 if da > db else -1 if da < db else 0)
-                n_committed += 1
-            self._add_counts(n_targets, n_below, n_committed)
-            return make_report((eid, t, pred, (), tuple(resolutions) if resolutions else ()))
         increment = self._increment
         label_of = channel.label if channel is not None else None
         verdict_of = self._verdict
@@ -195,23 +172,79 @@ class BaseOperator:
                 verdict = verdict_of(label, pred, c)
             if mass <= tau_t:
                 n_below += 1
-                if report:
-                    outcomes.append(TargetOutcome(node, mass, verdict, Action.BELOW_THRESHOLD))
+                outcomes.append(TargetOutcome(node, mass, verdict, Action.BELOW_THRESHOLD))
                 continue
             if node not in gnx:
                 graph.ensure_node(node)
             inc = increment(graph, node, pred, c, mass)
             if inc is None:
-                if report:
-                    outcomes.append(TargetOutcome(node, mass, verdict, Action.IGNORED))
+                outcomes.append(TargetOutcome(node, mass, verdict, Action.IGNORED))
                 continue
             da, db = inc
             commit(node, pred, eid, t, da, db, 1 if da > db else -1 if da < db else 0)
             n_committed += 1
-            if report:
-                outcomes.append(TargetOutcome(node, mass, verdict, Action.COMMITTED, da, db))
-        self._add_counts(n_targets, n_below, n_committed)
+            outcomes.append(TargetOutcome(node, mass, verdict, Action.COMMITTED, da, db))
+        self._add_totals(1, n_targets, n_below, n_committed)
         return make_report((eid, t, pred, tuple(outcomes), tuple(resolutions)))
+
+    def update_many(
+        self, graph: SceneGraph, items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]]
+    ) -> list[QueueResolution]:
+        """Apply (event, channel) pairs in order, exactly as ``update(graph, event, channel,
+        report=False)`` on each would (same map, provenance, queues and stats after every event),
+        with the per-call set-up done once. Returns the queue resolutions of all the events, in
+        order (what their reports' ``resolutions`` would hold). When an event is rejected, the
+        events before it stay applied (``stats["events"]`` counts them) and the error propagates.
+
+        Baselines ignore the channel: the verdict only feeds per-target reports.
+        """
+        vocab = graph.vocabulary
+        tau_t = self.config.tau_t
+        commit = graph.provenance.commit
+        gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
+        linear = self._linear  # a linear rule: d_alpha = T p, d_beta = T q for every target
+        split_of = self._split
+        increment = self._increment
+        tick = self.tick
+        out: list[QueueResolution] = []
+        n_events = n_targets = n_below = n_committed = 0
+        try:
+            for event, _channel in items:
+                pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
+                if vocab is not None and pred not in vocab:
+                    raise UnknownPredicateError(pred, vocab)
+                if t > graph.clock:
+                    res = tick(graph, t)
+                    if res:
+                        out += res
+                if linear:
+                    p, q = split_of(c)  # type: ignore[misc]
+                e_targets = e_below = e_committed = 0
+                for node, mass in event.targets.items():
+                    e_targets += 1
+                    if mass <= tau_t:
+                        e_below += 1
+                        continue
+                    if node not in gnx:
+                        graph.ensure_node(node)
+                    if linear:
+                        da = mass * p
+                        db = mass * q
+                    else:
+                        inc = increment(graph, node, pred, c, mass)
+                        if inc is None:
+                            continue
+                        da, db = inc
+                    commit(node, pred, eid, t, da, db, 1 if da > db else -1 if da < db else 0)
+                    e_committed += 1
+                n_events += 1
+                n_targets += e_targets
+                n_below += e_below
+                n_committed += e_committed
+        finally:
+            if n_events:
+                self._add_totals(n_events, n_targets, n_below, n_committed)
+        return out
 
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float] | None:
         """The increments (d_alpha, d_beta) of one target, or None when the rule ignores the claim."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 from scipy import special as _sp
@@ -145,121 +146,163 @@ class CalibratedOperator(BaseOperator):
         """Apply one event (Alg. 1). ``report=False`` skips building the per-target outcomes
         (the returned report then has ``targets == ()``); the map, queues, provenance, stats and
         calibration state are the same either way."""
-        pred, c, ctx, eid, t = event.predicate, event.confidence, event.context, event.id, event.t
+        if not report:
+            res = self._apply(graph, ((event, channel),), None)
+            return make_report((event.id, event.t, event.predicate, (), tuple(res) if res else ()))
+        reports: list[UpdateReport] = []
+        self._apply(graph, ((event, channel),), reports)
+        return reports[0]
+
+    def update_many(
+        self, graph: SceneGraph, items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]]
+    ) -> list[QueueResolution]:
+        """Apply (event, channel) pairs in order, exactly as ``update(graph, event, channel,
+        report=False)`` on each would (map, queues, provenance, stats and calibration state after
+        every event), with the per-call set-up done once; returns the queue resolutions in order.
+        When an event is rejected, the events before it stay applied (``stats["events"]`` counts
+        them) and the error propagates."""
+        return self._apply(graph, items, None)
+
+    def _apply(
+        self,
+        graph: SceneGraph,
+        items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]],
+        reports: list[UpdateReport] | None,
+    ) -> list[QueueResolution]:
+        """Alg. 1 for each (event, channel) in order; appends one report per event to ``reports``
+        (with per-target outcomes) unless it is None. Returns every event's queue resolutions."""
+        report = reports is not None
         vocab = graph.vocabulary
-        if vocab is not None and pred not in vocab:
-            raise UnknownPredicateError(pred, vocab)
-        resolutions = self.tick(graph, t) if t > graph.clock else []
         cfg = self.config
         tau_t, tau_rev, w0 = cfg.tau_t, cfg.tau_rev, cfg.w0
         prov = graph.provenance
         record = prov.record
-        # committed entries go to the store's journal (materialised on demand, folded by compaction
-        # without objects) unless the timeline is live: then the next refusal or quarantine would
-        # materialise the journal anyway, and recording directly is cheaper
-        direct = bool(prov._timeline)
         commit = prov.commit
         pairs_get = prov._pairs.get
         pending_map = prov._pending_by_pair  # pairs with entries waiting in Q or Q_bot
         prior_a, prior_b = prov.prior_alpha, prov.prior_beta
         gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
-        outcome_of = self.vocabulary.outcome_tables().get(pred) if self.vocabulary is not None else None
-        label_of = None
-        if channel is not None and outcome_of is not None:
-            label_of = channel.labels.get if type(channel) is FrameLabels else channel.label
-        frame = label_of is not None and type(channel) is FrameLabels
-        claim_pos = c >= 0.5
+        tables = self.vocabulary.outcome_tables() if self.vocabulary is not None else None
         comod = self.check_compatibility
-        n_targets = n_below = n_committed = n_quarantined = n_refused = 0
-        lam = kappa = -1.0
-        new_outcomes: list[int] = []
-        outcomes: list[TargetOutcome] = []
-        pair_slice: ConformalSlice | None = None  # this predicate's pair-level scores, fetched once
         min_refit, refit_growth = cfg.calibration.min_refit, cfg.calibration.refit_growth
-        for node, mass in event.targets.items():
-            n_targets += 1
-            if mass <= tau_t and not report:
-                n_below += 1
-                continue
-            if label_of is None:
-                y = None
-            else:
-                label = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
-                y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
-            if y is None:
-                verdict = _NO_CLAIM
-            else:
-                verdict = _CORR if (y == 1) == claim_pos else _CONTRA
-            if mass <= tau_t:
-                n_below += 1
+        calibrator = self.calibrator_
+        tick = self.tick
+        out: list[QueueResolution] = []
+        n_events = n_targets = n_below = n_committed = n_quarantined = n_refused = 0
+        try:
+            for event, channel in items:
+                pred, c, ctx, eid, t = event.predicate, event.confidence, event.context, event.id, event.t
+                if vocab is not None and pred not in vocab:
+                    raise UnknownPredicateError(pred, vocab)
+                resolutions = tick(graph, t) if t > graph.clock else []
+                # committed entries go to the store's journal (materialised on demand, folded by
+                # compaction without objects) unless the timeline is live: then the next refusal or
+                # quarantine would materialise the journal anyway, and recording directly is cheaper
+                direct = bool(prov._timeline)
+                outcome_of = tables.get(pred) if tables is not None else None
+                label_of = None
+                if channel is not None and outcome_of is not None:
+                    label_of = channel.labels.get if type(channel) is FrameLabels else channel.label
+                frame = label_of is not None and type(channel) is FrameLabels
+                claim_pos = c >= 0.5
+                e_targets = e_below = e_committed = e_quarantined = e_refused = 0
+                lam = kappa = -1.0
+                new_outcomes: list[int] = []
+                outcomes: list[TargetOutcome] = []
+                pair_slice: ConformalSlice | None = None  # this predicate's pair-level scores, fetched once
+                for node, mass in event.targets.items():
+                    e_targets += 1
+                    if mass <= tau_t and not report:
+                        e_below += 1
+                        continue
+                    if label_of is None:
+                        y = None
+                    else:
+                        label = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
+                        y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
+                    if y is None:
+                        verdict = _NO_CLAIM
+                    else:
+                        verdict = _CORR if (y == 1) == claim_pos else _CONTRA
+                    if mass <= tau_t:
+                        e_below += 1
+                        outcomes.append(TargetOutcome(node, mass, verdict, _BELOW))
+                        continue
+                    if node not in gnx:
+                        graph.ensure_node(node)
+                    key = (node, pred)
+                    log = pairs_get(key)
+                    if log is None:
+                        a, b = prior_a, prior_b
+                    else:
+                        a, b = log.alpha, log.beta
+                    if y is not None:
+                        new_outcomes.append(y)
+                        if pair_slice is None:
+                            pair_slice = self._pair_slice(pred)
+                        pair_slice.add_outcome(a / (a + b), y, min_refit, refit_growth)
+                    if lam < 0.0:
+                        lam, kappa = calibrator.likelihood_ratio(c, ctx, pred)
+                    w = w0 * kappa * mass
+                    da = w * lam / (1.0 + lam)
+                    db = w / (1.0 + lam)
+                    if comod and verdict is _CONTRA:
+                        # Property 2: refused and logged, never committed; geometry's stance opposes the claim
+                        stance = -1 if claim_pos else 1
+                        had_pending = key in pending_map
+                        record(node, pred, eid, t, da, db, _REFUSED, stance)
+                        if had_pending:  # otherwise the only pending entry is this refused one
+                            resolutions += queues.quarantine_feedback(prov, node, pred, stance, eid, t)
+                        e_refused += 1
+                        if report:
+                            outcomes.append(TargetOutcome(node, mass, verdict, _A_REFUSED, 0.0, 0.0))
+                        continue
+                    stance = 1 if lam > 1.0 else -1 if lam < 1.0 else 0
+                    if key in pending_map:
+                        fb = queues.quarantine_feedback(prov, node, pred, stance, eid, t)
+                        if fb:
+                            resolutions += fb
+                            a, b = prov.alpha_beta(node, pred)
+                    # revision test: KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev (§4.3); the bound
+                    # settles it without special functions when it is far below tau_rev
+                    if kl_upper_bound(a, b, da, db) < tau_rev - 2e-8 * (1.0 + a + b + 2.0 * (da + db)):
+                        exceeds = False
+                    else:
+                        exceeds = revision_kl_exceeds(a, b, da, db, tau_rev)
+                    if exceeds:
+                        record(node, pred, eid, t, da, db, _QUARANTINED, stance)
+                        e_quarantined += 1
+                        if report:
+                            outcomes.append(TargetOutcome(node, mass, verdict, _A_QUARANTINED, 0.0, 0.0))
+                    else:
+                        if direct:
+                            record(node, pred, eid, t, da, db, _COMMITTED, stance)
+                        else:
+                            commit(node, pred, eid, t, da, db, stance)
+                        e_committed += 1
+                        if report:
+                            outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))
+                    if comod and verdict is _CORR and key in pending_map:
+                        resolutions += queues.resolve_disagreements(prov, node, pred, t)
+                n_events += 1
+                n_targets += e_targets
+                n_below += e_below
+                n_committed += e_committed
+                n_quarantined += e_quarantined
+                n_refused += e_refused
+                if new_outcomes:
+                    add = calibrator.add
+                    for y in new_outcomes:
+                        add(ctx, pred, c, y)
+                if resolutions:
+                    self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
+                    out += resolutions
                 if report:
-                    outcomes.append(TargetOutcome(node, mass, verdict, _BELOW))
-                continue
-            if node not in gnx:
-                graph.ensure_node(node)
-            key = (node, pred)
-            log = pairs_get(key)
-            if log is None:
-                a, b = prior_a, prior_b
-            else:
-                a, b = log.alpha, log.beta
-            if y is not None:
-                new_outcomes.append(y)
-                if pair_slice is None:
-                    pair_slice = self._pair_slice(pred)
-                pair_slice.add_outcome(a / (a + b), y, min_refit, refit_growth)
-            if lam < 0.0:
-                lam, kappa = self.calibrator_.likelihood_ratio(c, ctx, pred)
-            w = w0 * kappa * mass
-            da = w * lam / (1.0 + lam)
-            db = w / (1.0 + lam)
-            if comod and verdict is _CONTRA:
-                # Property 2: refused and logged, never committed; geometry's stance opposes the claim
-                stance = -1 if claim_pos else 1
-                had_pending = key in pending_map
-                record(node, pred, eid, t, da, db, _REFUSED, stance)
-                if had_pending:  # otherwise the only pending entry is this refused one
-                    resolutions += queues.quarantine_feedback(prov, node, pred, stance, eid, t)
-                n_refused += 1
-                if report:
-                    outcomes.append(TargetOutcome(node, mass, verdict, _A_REFUSED, 0.0, 0.0))
-                continue
-            stance = 1 if lam > 1.0 else -1 if lam < 1.0 else 0
-            if key in pending_map:
-                fb = queues.quarantine_feedback(prov, node, pred, stance, eid, t)
-                if fb:
-                    resolutions += fb
-                    a, b = prov.alpha_beta(node, pred)
-            # revision test: KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev (§4.3); the bound
-            # settles it without special functions when it is far below tau_rev
-            if kl_upper_bound(a, b, da, db) < tau_rev - 2e-8 * (1.0 + a + b + 2.0 * (da + db)):
-                exceeds = False
-            else:
-                exceeds = revision_kl_exceeds(a, b, da, db, tau_rev)
-            if exceeds:
-                record(node, pred, eid, t, da, db, _QUARANTINED, stance)
-                n_quarantined += 1
-                if report:
-                    outcomes.append(TargetOutcome(node, mass, verdict, _A_QUARANTINED, 0.0, 0.0))
-            else:
-                if direct:
-                    record(node, pred, eid, t, da, db, _COMMITTED, stance)
-                else:
-                    commit(node, pred, eid, t, da, db, stance)
-                n_committed += 1
-                if report:
-                    outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))
-            if comod and verdict is _CORR and key in pending_map:
-                resolutions += queues.resolve_disagreements(prov, node, pred, t)
-        self._add_counts(n_targets, n_below, n_committed, n_quarantined, n_refused)
-        if new_outcomes:
-            add = self.calibrator_.add
-            for y in new_outcomes:
-                add(ctx, pred, c, y)
-        if resolutions:
-            self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
-            return make_report((eid, t, pred, tuple(outcomes), tuple(resolutions)))
-        return make_report((eid, t, pred, tuple(outcomes) if outcomes else (), ()))
+                    reports.append(make_report((eid, t, pred, tuple(outcomes), tuple(resolutions))))  # type: ignore[union-attr]
+        finally:
+            if n_events:
+                self._add_totals(n_events, n_targets, n_below, n_committed, n_quarantined, n_refused)
+        return out
 
     def _pair_slice(self, predicate: str) -> ConformalSlice:
         """The pair-level conformal scores of a predicate (created on first use)."""
