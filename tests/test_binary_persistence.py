@@ -565,3 +565,19 @@ def test_pylist_shares_only_bit_identical_values() -> None:
     assert _pylist(y) == y.tolist()
     r = np.random.default_rng(0).random(10_000)
     assert _pylist(r) == r.tolist()
+
+
+def test_load_without_pending_entries_defers_every_entry(tmp_path: Path) -> None:
+    """No queue entries: loading makes no entry object and does not even split the event ids;
+    beliefs are there at once and the first log read gives the original logs."""
+    g = SceneGraph()
+    for i in range(50):
+        g.add_node(f"n{i}")
+        g.provenance.commit(f"n{i}", "is_car", f"e{i}", i, 0.5 + i, 0.25)
+    h = SceneGraph.load(g.save(tmp_path / "g.npz"))
+    prov = h.provenance
+    assert prov.deferred and not prov.quarantine and prov._deferred._eid_arr is None  # type: ignore[union-attr]
+    assert prov.alpha_beta("n7", "is_car") == g.provenance.alpha_beta("n7", "is_car")
+    assert prov.deferred  # reading a belief builds nothing
+    assert [e.as_tuple() for e in prov.entries("n7", "is_car")] == [("e7", 7, 7.5, 0.25, "committed")]
+    assert not prov.deferred and _signature(h) == _signature(g)

@@ -1031,7 +1031,7 @@ def _build_store(h: _Header, statuses: list[EntryStatus], pair_keys: list[tuple[
                             n_folded, null, eids, corr_entry, corr_len, corr_ids, timeline)
     # the pending entries exist at once: the queues hold them (transitions act on these objects)
     pending = np.flatnonzero(np.isin(status, [i for i, s in enumerate(statuses) if s in PENDING]))
-    built = dict(zip(pending.tolist(), loaded.entries(pending)))
+    built = dict(zip(pending.tolist(), loaded.entries(pending))) if len(pending) else {}
     pick = built.__getitem__
     store.quarantine = deque(map(pick, queues["quarantine"].tolist()))
     store.disagreement = deque(map(pick, queues["disagreement"].tolist()))
