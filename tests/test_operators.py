@@ -28,6 +28,19 @@ def test_every_operator_passes_the_conformance_suite(name: str) -> None:
     check_fusion_operator(make_operator(name, None, TABLE))
 
 
+def test_conformance_catches_an_update_many_that_differs_from_update() -> None:
+    from sgbelief.fusion.operators.baselines import MajorityVoteOperator
+
+    class DropsFirst(MajorityVoteOperator):
+        name = "drops-first"
+
+        def update_many(self, graph, items):  # type: ignore[no-untyped-def]
+            return super().update_many(graph, list(items)[1:])
+
+    with pytest.raises(AssertionError, match="update_many"):
+        check_fusion_operator(DropsFirst(None, TABLE))
+
+
 def test_a_user_written_operator_passes_too() -> None:
     from sgbelief.fusion.operators.base import BaseOperator
 
