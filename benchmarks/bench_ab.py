@@ -7,8 +7,12 @@ setting of ``bench_throughput.py``). The cost per event is divided by the cost o
 dict-increment loop over the same events in the same process, so the figure ("reference units")
 follows the machine's load far less than events/s do. Checkouts alternate for ``--rounds`` rounds;
 the minimum and median per checkout and the speed-up (old min / new min) are reported.
+``--new-mode many`` times the new checkout through one ``update_many`` call over the stream (what the
+replay engine runs) instead of per-event ``update`` calls (``--old-mode`` likewise, when the old
+checkout has it).
 
 Usage: .venv/bin/python benchmarks/bench_ab.py --old /tmp/old --new . [--operators majority,comod] [--rounds 3]
+       [--old-mode update|many] [--new-mode update|many]
 (make the old checkout with ``git worktree add /tmp/old <rev>``).
 """
 
@@ -22,7 +26,7 @@ import sys
 from pathlib import Path
 
 
-def child(tree: str, operator: str, repeat: int) -> float:
+def child(tree: str, operator: str, repeat: int, mode: str = "update") -> float:
     """Best (cost per event / reference-loop cost per event) of ``repeat`` timed passes."""
     sys.path.insert(0, tree)
     import gc
@@ -60,8 +64,11 @@ def child(tree: str, operator: str, repeat: int) -> float:
         try:
             r1 = ref()
             t0 = clock()
-            for ev, lab in timed:
-                upd(g, ev, lab, report=False)
+            if mode == "many":
+                op.update_many(g, timed)
+            else:
+                for ev, lab in timed:
+                    upd(g, ev, lab, report=False)
             dt = clock() - t0
             r2 = ref()
         finally:
@@ -78,10 +85,12 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=2, help="timed passes per process (best kept)")
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--child", nargs=2, metavar=("TREE", "OPERATOR"), help=argparse.SUPPRESS)
+    ap.add_argument("--old-mode", choices=("update", "many"), default="update")
+    ap.add_argument("--new-mode", choices=("update", "many"), default="update")
+    ap.add_argument("--child", nargs=3, metavar=("TREE", "OPERATOR", "MODE"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        print(child(args.child[0], args.child[1], args.repeat))
+        print(child(args.child[0], args.child[1], args.repeat, args.child[2]))
         return 0
     if not args.old:
         ap.error("--old is required")
@@ -91,8 +100,9 @@ def main() -> int:
         costs: dict[str, list[float]] = {"old": [], "new": []}
         for _ in range(args.rounds):
             for name, tree in trees.items():
+                mode = args.old_mode if name == "old" else args.new_mode
                 res = subprocess.run(
-                    [sys.executable, __file__, "--child", tree, op, "--repeat", str(args.repeat)],
+                    [sys.executable, __file__, "--child", tree, op, mode, "--repeat", str(args.repeat)],
                     capture_output=True, text=True, check=True,
                 )
                 costs[name].append(float(res.stdout.split()[-1]))
@@ -103,7 +113,8 @@ def main() -> int:
             print(f"{op:12s} old {row['old_min']:7.1f} (median {row['old_median']:7.1f})  "
                   f"new {row['new_min']:7.1f} (median {row['new_median']:7.1f})  speed-up {row['speedup']:.2f}x", flush=True)
     res = {"bench": "ab", "unit": "cost per event / reference-loop cost per event", "old": trees["old"],
-           "new": trees["new"], "rounds": args.rounds, "operators": out}
+           "new": trees["new"], "old_mode": args.old_mode, "new_mode": args.new_mode, "rounds": args.rounds,
+           "operators": out}
     print(json.dumps(res))
     return 0
 

@@ -31,10 +31,11 @@ def test_ab_benchmark_compares_two_checkouts() -> None:
     root = str(BENCH.parent)
     out = subprocess.run(
         [sys.executable, str(BENCH / "bench_ab.py"), "--old", root, "--new", root, "--operators", "majority",
-         "--rounds", "1", "--repeat", "1", "--json"],
+         "--rounds", "1", "--repeat", "1", "--new-mode", "many", "--json"],
         capture_output=True, text=True, check=True, timeout=300,
     ).stdout
     res = json.loads(out.strip().splitlines()[-1])
+    assert (res["old_mode"], res["new_mode"]) == ("update", "many")
     row = res["operators"]["majority"]
     assert row["old_min"] > 1.0 and row["new_min"] > 1.0 and row["speedup"] > 0
 
