@@ -129,3 +129,32 @@ def test_streaming_replay_in_chunks_names_the_rejected_line(tmp_path: Any) -> No
             replay(iter_events(path, stats=stats), make_runs(ops, TABLE, CONFIG), line_of=stats, source=path)
         assert info.value.line == bad + 2  # the header is line 1
         assert repr(recs[bad].id) in str(info.value)
+
+
+@pytest.mark.parametrize("name", ["majority", "comod"])
+def test_a_subclass_that_overrides_update_gets_it_from_update_many_and_replay(name: str) -> None:
+    """update_many must not bypass a user's update(): it falls back to it, event by event."""
+    from sgbelief.eval.batched import random_records
+    from sgbelief.eval.replay import make_runs, replay
+    from sgbelief.fusion.registry import OPERATORS
+
+    class Counting(OPERATORS[name]):  # type: ignore[misc, valid-type]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self.calls = 0
+
+        def update(self, graph: SceneGraph, event: Any, channel: Any = None, *, report: bool = True) -> Any:
+            self.calls += 1
+            return super().update(graph, event, channel, report=report)
+
+    items = _items(50, 2)
+    op, g = Counting(CONFIG, TABLE), SceneGraph()
+    op.update_many(g, items)
+    assert op.calls == 50
+    ref, g_ref = make_operator(name, CONFIG, TABLE), SceneGraph()
+    ref.update_many(g_ref, items)
+    assert _state(op, g, []) == _state(ref, g_ref, [])
+    recs = random_records(2, 600, n_nodes=6, predicates=tuple(TABLE.predicates), labels=("car", None))
+    run = make_runs([Counting(CONFIG, TABLE)], TABLE, CONFIG)[0]
+    replay(recs, [run])
+    assert run.operator.calls == 600  # type: ignore[attr-defined]

@@ -142,7 +142,7 @@ class BaseOperator:
         ``targets == ()``); the map, provenance and stats are the same either way.
         """
         if not report:
-            res = self.update_many(graph, ((event, channel),))
+            res = self._update_lean(graph, ((event, channel),))
             return make_report((event.id, event.t, event.predicate, (), tuple(res) if res else ()))
         pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
         vocab = graph.vocabulary
@@ -196,8 +196,28 @@ class BaseOperator:
         order (what their reports' ``resolutions`` would hold). When an event is rejected, the
         events before it stay applied (``stats["events"]`` counts them) and the error propagates.
 
-        Baselines ignore the channel: the verdict only feeds per-target reports.
+        Baselines ignore the channel: the verdict only feeds per-target reports. A subclass that
+        overrides ``update`` (and not ``update_many``) gets its own ``update`` on each event.
         """
+        if type(self).update is not BaseOperator.update:
+            return self._update_each(graph, items)
+        return self._update_lean(graph, items)
+
+    def _update_each(
+        self, graph: SceneGraph, items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]]
+    ) -> list[QueueResolution]:
+        """``update_many`` through ``self.update`` (protocol signature) on each event."""
+        out: list[QueueResolution] = []
+        for event, channel in items:
+            res = self.update(graph, event, channel).resolutions
+            if res:
+                out += res
+        return out
+
+    def _update_lean(
+        self, graph: SceneGraph, items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]]
+    ) -> list[QueueResolution]:
+        """The report-free update of each event, with the subclass's increment rule."""
         vocab = graph.vocabulary
         tau_t = self.config.tau_t
         commit = graph.provenance.commit

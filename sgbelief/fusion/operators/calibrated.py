@@ -160,7 +160,10 @@ class CalibratedOperator(BaseOperator):
         report=False)`` on each would (map, queues, provenance, stats and calibration state after
         every event), with the per-call set-up done once; returns the queue resolutions in order.
         When an event is rejected, the events before it stay applied (``stats["events"]`` counts
-        them) and the error propagates."""
+        them) and the error propagates. A subclass that overrides ``update`` (and not this method)
+        gets its own ``update`` on each event."""
+        if type(self).update is not CalibratedOperator.update:
+            return self._update_each(graph, items)
         return self._apply(graph, items, None)
 
     def _apply(
