@@ -350,3 +350,20 @@ def test_cal_is_invariant_to_a_monotone_confidence_transform() -> None:
         b, _, _ = _committed(name, lambda c: c)
         cb, _, _ = _committed(name, lambda c: c**3)
         assert len(b ^ cb) > 6, name  # the uncalibrated operators change
+
+
+@settings(max_examples=200, deadline=None)
+@given(confs=st.lists(st.floats(0, 1), min_size=1, max_size=40), window=st.integers(1, 6),
+       min_support=st.integers(1, 6))
+def test_refined_is_the_vote_of_the_last_window_claims(confs: list[float], window: int, min_support: int) -> None:
+    """Refined baseline: Beta(1 + #pos, 1 + #neg) over the last W claims once min_support claims
+    arrived, the prior before (the running count of positive votes equals recounting the window)."""
+    op = make_operator("refined", {"baselines": {"refined": {"window": window, "min_support": min_support}}}, TABLE)
+    g = SceneGraph()
+    for t, c in enumerate(confs):
+        op.update(g, EvidenceEvent({"n0": 1.0}, "is_car", c, "ctx", t), report=t % 2 == 0)
+        n_seen = t + 1
+        last = confs[max(0, n_seen - window):n_seen]
+        pos = sum(1 for x in last if x >= 0.5)
+        expect = (1.0 + pos, 1.0 + len(last) - pos) if len(last) >= min_support else (1.0, 1.0)
+        assert g.provenance.alpha_beta("n0", "is_car") == pytest.approx(expect, abs=1e-9)

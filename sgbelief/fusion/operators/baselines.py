@@ -82,21 +82,29 @@ class RefinedOperator(BaseOperator):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self._windows: dict[tuple[Any, str], deque[int]] = {}
+        #: per (v, phi): [the last W votes (1: c >= 0.5), how many of them are 1]
+        self._windows: dict[tuple[Any, str], list[Any]] = {}
         cfg = self.config.baselines.refined
         self._window, self._min_support = cfg.window, cfg.min_support
 
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
         key = (node, predicate)
-        win = self._windows.get(key)
-        if win is None:
-            win = self._windows[key] = deque(maxlen=self._window)
-        win.append(1 if c >= 0.5 else 0)
+        state = self._windows.get(key)
+        if state is None:
+            state = self._windows[key] = [deque(maxlen=self._window), 0]
+        win, pos = state
+        vote = 1 if c >= 0.5 else 0
+        if len(win) == self._window:
+            pos -= win[0]  # the vote the append below pushes out
+        win.append(vote)
+        pos += vote
+        state[1] = pos
         prov = graph.provenance
-        a, b = prov.alpha_beta(node, predicate)
-        if len(win) < self._min_support:
+        log = prov._pairs.get(key)
+        a, b = (prov.prior_alpha, prov.prior_beta) if log is None else (log.alpha, log.beta)
+        n = len(win)
+        if n < self._min_support:
             ta, tb = prov.prior_alpha, prov.prior_beta
         else:
-            pos = sum(win)
-            ta, tb = prov.prior_alpha + pos, prov.prior_beta + (len(win) - pos)
+            ta, tb = prov.prior_alpha + pos, prov.prior_beta + (n - pos)
         return ta - a, tb - b
