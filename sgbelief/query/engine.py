@@ -224,18 +224,68 @@ class QueryEngine:
         return p
 
     def geometric(self, node: Any, name: str) -> bool | None:
+        return self.geometric_many(name, (node,))[0]
+
+    def belief_many(self, predicate: str, nodes: Iterable[Any]) -> list[float]:
+        """:meth:`belief` of each node, in order. For a SceneGraph read through its own
+        ``probability``, the means come straight from the belief table (the first read goes
+        through ``probability``, which raises for an unknown predicate or node)."""
+        cache = self._prob.setdefault(predicate, {})
+        fn = self.probability_fn
+        table = self._belief_table()
+        checked = False
+        out: list[float] = []
+        for node in nodes:
+            p = cache.get(node)
+            if p is None:
+                if checked and table is not None and node in table[0]:
+                    log = table[1]((node, predicate))
+                    a, b = (table[2], table[3]) if log is None else (log.alpha, log.beta)
+                    p = float(a / (a + b))
+                else:
+                    p = float(fn(node, predicate))
+                    checked = True
+                cache[node] = p
+                self.belief_reads += 1
+            out.append(p)
+        return out
+
+    def _belief_table(self) -> tuple[Any, Callable[[Any], Any], float, float] | None:
+        """(node dict, pair -> belief lookup, prior alpha, prior beta) when ``probability_fn`` is a
+        plain SceneGraph's own ``probability`` (mean = alpha / (alpha + beta), Eq. 5), else None."""
+        from sgbelief.graph.provenance import ProvenanceStore
+        from sgbelief.graph.scene_graph import SceneGraph
+
+        fn, g = self.probability_fn, self.graph
+        prov = getattr(g, "provenance", None)
+        if not (getattr(fn, "__self__", None) is g and getattr(fn, "__func__", None) is SceneGraph.probability
+                and type(prov) is ProvenanceStore):
+            return None
+        return g.nx._node, prov._pairs.get, prov.prior_alpha, prov.prior_beta
+
+    def geometric_many(self, name: str, nodes: Iterable[Any]) -> list[bool | None]:
+        """The geometric predicate ``name`` on each node, in order (cached): a precomputed
+        ``geometric_predicates[name]`` node attribute when ``use_precomputed``, else the registry's."""
         cache = self._geo.setdefault(name, {})
-        if node in cache:
-            return cache[node]
-        v: bool | None = None
-        pre = self.graph.node_attrs(node).get("geometric_predicates") if self.use_precomputed else None
-        if isinstance(pre, Mapping) and name in pre and pre[name] is not None:
-            v = bool(pre[name])
-        else:
-            v = self.registry.get(name)(self.ctx, node)
-        cache[node] = v
-        self.geometric_evals += 1
-        return v
+        attrs_of = self.ctx.attrs
+        pred = None
+        out: list[bool | None] = []
+        for node in nodes:
+            if node in cache:
+                out.append(cache[node])
+                continue
+            v: bool | None = None
+            pre = attrs_of(node).get("geometric_predicates") if self.use_precomputed else None
+            if pre is not None and isinstance(pre, Mapping) and name in pre and pre[name] is not None:
+                v = bool(pre[name])
+            else:
+                if pred is None:
+                    pred = self.registry.get(name)
+                v = pred(self.ctx, node)
+            cache[node] = v
+            self.geometric_evals += 1
+            out.append(v)
+        return out
 
     def preload_geometric(self, name: str, values: Mapping[Any, bool | None]) -> None:
         """Seed the cache of geometric predicate ``name`` (e.g. values computed on a ground-truth
@@ -255,34 +305,61 @@ class QueryEngine:
 
     def score(self, node: Any, compound: Compound, kinds: Mapping[str, str], *, prune: bool = False,
               tau: float | None = None) -> Match | None:
-        """Score one node; with ``prune`` return None as soon as P < tau is certain."""
+        """Score one node: P(v, q) as in the module docstring, beliefs first, then geometry, each in
+        literal order; with ``prune`` return None as soon as P < tau is certain."""
+        scored = self.score_many((node,), compound, kinds, prune=prune, tau=tau)
+        return scored[0] if scored else None
+
+    def score_many(self, nodes: Sequence[Any], compound: Compound, kinds: Mapping[str, str], *,
+                   prune: bool = False, tau: float | None = None) -> list[Match]:
+        """:meth:`score` of each node (pruned ones left out), in order. Works one literal at a time
+        over the nodes still in the running (beliefs first, then geometry, each in literal order),
+        so a node's product is formed in the same order and reads only what it needs."""
         tau = self.tau if tau is None else tau
-        comps: list[Component] = []
-        prob = 1.0
         lits: Sequence[Literal] = compound.literals
-        # beliefs first (cheap), then geometry
-        for lit in lits:
-            if kinds[lit.name] != BELIEF:
-                continue
-            p = self.belief(node, lit.name)
-            f = 1.0 - p if lit.negated else p
-            prob *= f
-            comps.append(Component(lit.name, BELIEF, lit.negated, p, f,
-                                   node in self.evidence_nodes(lit.name)))
-            if prune and prob < tau:
-                return None
-        for lit in lits:
-            if kinds[lit.name] != GEOMETRIC:
-                continue
-            v = self.geometric(node, lit.name)
-            f = 0.0 if v is None else float(v != lit.negated)
-            prob *= f
-            comps.append(Component(lit.name, GEOMETRIC, lit.negated, v, f))
-            if prune and prob < tau:
-                return None
+        n = len(nodes)
+        prob = [1.0] * n
+        alive = list(range(n))
+        # beliefs first (cheap), then geometry, each in literal order; a literal's values by position
+        steps = [k for k, lit in enumerate(lits) if kinds[lit.name] == BELIEF]
+        steps += [k for k, lit in enumerate(lits) if kinds[lit.name] == GEOMETRIC]
+        values: dict[int, dict[int, Any]] = {}
+        for k in steps:
+            lit = lits[k]
+            if not alive:
+                break
+            at = [nodes[i] for i in alive]
+            if kinds[lit.name] == BELIEF:
+                got: list[Any] = self.belief_many(lit.name, at)
+                factors = [1.0 - p if lit.negated else p for p in got]
+            else:
+                got = self.geometric_many(lit.name, at)
+                neg = lit.negated
+                factors = [0.0 if v is None else float(v != neg) for v in got]
+            values[k] = dict(zip(alive, got))
+            for i, f in zip(alive, factors):
+                prob[i] *= f
+            if prune:
+                alive = [i for i in alive if not prob[i] < tau]
         order = {lit.name: i for i, lit in enumerate(lits)}
-        comps.sort(key=lambda c: order[c.name])
-        return Match(node, prob, tuple(comps), prob >= tau)
+        rank = order.__getitem__
+        evidence = {lits[k].name: self.evidence_nodes(lits[k].name) for k in steps if kinds[lits[k].name] == BELIEF}
+        out: list[Match] = []
+        for i in alive:
+            node = nodes[i]
+            comps: list[Component] = []
+            for k in steps:
+                lit = lits[k]
+                v = values[k][i]
+                if kinds[lit.name] == BELIEF:
+                    comps.append(Component(lit.name, BELIEF, lit.negated, v, 1.0 - v if lit.negated else v,
+                                           node in evidence[lit.name]))
+                else:
+                    comps.append(Component(lit.name, GEOMETRIC, lit.negated, v,
+                                           0.0 if v is None else float(v != lit.negated)))
+            comps.sort(key=lambda c: rank(c.name))
+            out.append(Match(node, prob[i], tuple(comps), prob[i] >= tau))
+        return out
 
     def evaluate(self, expr: str | Compound, *, tau: float | None = None, nodes: Iterable[Any] | None = None,
                  include_all: bool = False, limit: int | None = None, name: str | None = None) -> QueryResult:
@@ -291,11 +368,8 @@ class QueryEngine:
         tau = self.tau if tau is None else tau
         compound, kinds = self.compile(expr)
         pool = self.candidates(compound, kinds, nodes)
-        matches = []
-        for node in pool:
-            m = self.score(node, compound, kinds, prune=not include_all, tau=tau)
-            if m is not None and (include_all or m.retrieved):
-                matches.append(m)
+        matches = [m for m in self.score_many(pool, compound, kinds, prune=not include_all, tau=tau)
+                   if include_all or m.retrieved]
         matches.sort(key=lambda m: (-m.probability, str(m.node)))
         if limit is not None:
             matches = matches[:limit]
@@ -309,12 +383,7 @@ class QueryEngine:
     def probabilities(self, expr: str | Compound, nodes: Iterable[Any] | None = None) -> dict[Any, float]:
         """P(node, compound) for every candidate (no pruning)."""
         compound, kinds = self.compile(expr)
-        out = {}
-        for node in self.candidates(compound, kinds, nodes):
-            m = self.score(node, compound, kinds)
-            assert m is not None
-            out[node] = m.probability
-        return out
+        return {m.node: m.probability for m in self.score_many(self.candidates(compound, kinds, nodes), compound, kinds)}
 
     def explain(self, expr: str | Compound, node: Any) -> Match:
         """Full breakdown for one node (whether or not it is a candidate)."""

@@ -29,6 +29,8 @@ Every threshold is a field of :class:`RelationConfig` (metres unless stated).
 from __future__ import annotations
 
 import math
+from itertools import chain, repeat
+from operator import is_
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
@@ -194,6 +196,53 @@ def box_distance(a: Box, b: Box) -> float:
     return float(math.sqrt(float(gap @ gap)))
 
 
+def _attr_getter(graph: Any) -> Callable[[Any], dict[str, Any]]:
+    """``graph.node_attrs``; for a SceneGraph that does not override it, a direct read of
+    networkx's node dict (the same dict; an unknown node still gets the graph's own error)."""
+    from sgbelief.graph.scene_graph import SceneGraph
+
+    if not (isinstance(graph, SceneGraph) and type(graph).node_attrs is SceneGraph.node_attrs):
+        return graph.node_attrs  # type: ignore[no-any-return]
+    node_dict = graph.nx._node
+
+    def attrs_of(node: Any) -> dict[str, Any]:
+        try:
+            return node_dict[node]  # type: ignore[no-any-return]
+        except (KeyError, TypeError):
+            return graph.node_attrs(node)  # type: ignore[no-any-return]
+
+    return attrs_of
+
+
+def _fill_boxes(lo: np.ndarray, hi: np.ndarray, rows: list[int] | None, values: list[Any], pair: bool) -> None:
+    """``lo[i], hi[i] = v[0], v[1]`` (``pair``: a bbox) or ``lo[i] = hi[i] = v`` (a centroid) for
+    each row i and its value v (``rows`` None: every row): one array conversion when every value
+    has the usual shape, else row by row (numpy's own broadcasting and errors)."""
+    if not values:
+        return
+    rows_ix: Any = slice(None) if rows is None else rows
+    arr = None
+    try:  # every value 2 x 3 (a bbox) or 3 (a centroid): one pass over the numbers
+        if pair and set(map(len, values)) == {2}:
+            if set(map(len, chain.from_iterable(values))) == {3}:
+                arr = np.fromiter(chain.from_iterable(chain.from_iterable(values)), dtype=float,
+                                  count=6 * len(values)).reshape(-1, 2, 3)
+        elif not pair and set(map(len, values)) == {3}:
+            arr = np.fromiter(chain.from_iterable(values), dtype=float, count=3 * len(values)).reshape(-1, 3)
+    except (ValueError, TypeError):
+        arr = None
+    if arr is not None:
+        lo[rows_ix] = arr[:, 0] if pair else arr
+        hi[rows_ix] = arr[:, 1] if pair else arr
+        return
+    for i, v in zip(range(len(values)) if rows is None else rows, values):
+        if pair:
+            lo[i] = v[0]
+            hi[i] = v[1]
+        else:
+            lo[i] = hi[i] = v
+
+
 # --------------------------------------------------------------------------------------------
 # evaluation context: cached arrays + per-scene spatial indexes over one graph
 # --------------------------------------------------------------------------------------------
@@ -213,6 +262,9 @@ class GeometryContext:
         self._on_pairs: list[tuple[int, int]] | None = None
         self._supports: dict[int, list[int]] | None = None  # upper -> lowers
         self._loads: dict[int, list[int]] | None = None  # lower -> uppers
+        #: (class, distance) -> (per node: has a neighbour of the class, scenes computed so far)
+        self._near_cache: dict[tuple[str, float], tuple[np.ndarray, set[Any]]] = {}
+        self._attrs_of: Callable[[Any], dict[str, Any]] = _attr_getter(graph)
 
     # -- arrays --------------------------------------------------------------------------------
     def _build(self) -> None:
@@ -221,44 +273,46 @@ class GeometryContext:
         g = self.graph
         nodes = list(g.nodes())
         n = len(nodes)
+        get_attrs = self._attrs_of
+        attrs = list(map(get_attrs, nodes))
         lo = np.full((n, 3), np.nan)
         hi = np.full((n, 3), np.nan)
-        labels: list[str | None] = []
-        scenes: list[Any] = []
-        floor_attr = np.full(n, np.nan)
-        for i, node in enumerate(nodes):
-            a = g.node_attrs(node)
-            bbox = a.get("bbox")
-            if bbox is not None:
-                lo[i] = bbox[0]
-                hi[i] = bbox[1]
-            elif a.get("centroid") is not None:
-                lo[i] = hi[i] = a["centroid"]
-            lab = a.get("label")
-            labels.append(None if lab is None else str(lab))
-            scenes.append(a.get("scene"))
-            if a.get("floor_z") is not None:
-                floor_attr[i] = float(a["floor_z"])
+        bboxes = [a.get("bbox") for a in attrs]
+        if not any(map(is_, bboxes, repeat(None))):  # (not ``None in``: that compares with ==)
+            _fill_boxes(lo, hi, None, bboxes, True)
+        else:
+            _fill_boxes(lo, hi, [i for i, b in enumerate(bboxes) if b is not None],
+                        [b for b in bboxes if b is not None], True)
+            cents = [(i, c) for i, (a, b) in enumerate(zip(attrs, bboxes))
+                     if b is None and (c := a.get("centroid")) is not None]
+            _fill_boxes(lo, hi, [i for i, _ in cents], [c for _, c in cents], False)
+        labels: list[str | None] = [None if (lab := a.get("label")) is None else str(lab) for a in attrs]
+        scenes: list[Any] = [a.get("scene") for a in attrs]
+        floor_attr = np.array([np.nan if (z := a.get("floor_z")) is None else float(z) for a in attrs], dtype=float)
         self.nodes = nodes
-        self.index = {node: i for i, node in enumerate(nodes)}
+        self.index = dict(zip(nodes, range(n)))
         self.lo, self.hi = lo, hi
         self.has_box = ~np.isnan(lo).any(axis=1)
         self.labels = labels
         self.scenes = scenes
         structural = set(self.config.structural_labels)
-        self.structural = np.array([lab in structural for lab in labels], dtype=bool)
-        groups: dict[Any, list[int]] = {}
-        for i, s in enumerate(scenes):
-            groups.setdefault(s, []).append(i)
-        self.groups = {s: np.asarray(ix, dtype=int) for s, ix in groups.items()}
+        kinds = {lab: (lab in structural, lab == "floor") for lab in dict.fromkeys(labels)}
+        self.structural = np.fromiter((kinds[lab][0] for lab in labels), dtype=bool, count=n)
+        is_floor = np.fromiter((kinds[lab][1] for lab in labels), dtype=bool, count=n)
+        # scene -> its node indices (ascending), scenes in order of first appearance
+        code_of = {s: c for c, s in enumerate(dict.fromkeys(scenes))}
+        scene_code = np.fromiter(map(code_of.__getitem__, scenes), dtype=np.intp, count=n)
+        order = np.argsort(scene_code, kind="stable")
+        bounds = np.cumsum(np.bincount(scene_code, minlength=len(code_of)))[:-1]
+        self.groups = dict(zip(code_of, np.split(order, bounds))) if n else {}
         # floor height per scene: 'floor' objects' top, else the lowest box bottom
         floor_z = np.array(floor_attr)
-        for s, ix in self.groups.items():
+        for ix in self.groups.values():
             ok = ix[self.has_box[ix]]
             if ok.size == 0:
                 continue
-            floors = [i for i in ok if labels[i] == "floor"]
-            fz = float(np.median(hi[floors, 2])) if floors else float(np.min(lo[ok, 2]))
+            floors = ok[is_floor[ok]]
+            fz = float(np.median(hi[floors, 2])) if floors.size else float(np.min(lo[ok, 2]))
             missing = ix[np.isnan(floor_z[ix])]
             floor_z[missing] = fz
         self.floor_z = floor_z
@@ -269,11 +323,11 @@ class GeometryContext:
         return self.index[node]
 
     def attrs(self, node: Any) -> dict[str, Any]:
-        return self.graph.node_attrs(node)
+        return self._attrs_of(node)
 
     def attr(self, node: Any, key: str) -> Any:
         """A node attribute: top level first, then inside its ``attributes`` dict (nodes.json)."""
-        a = self.graph.node_attrs(node)
+        a = self._attrs_of(node)
         v = a.get(key)
         if v is None:
             inner = a.get("attributes")
@@ -310,11 +364,47 @@ class GeometryContext:
                 known = set()
             preds = [f"is_{c}" for c in sorted(wanted) if f"is_{c}" in known]
             for p in preds:
+                committed = self._committed(p)
+                if committed is not None:
+                    mask |= committed
+                    continue
                 for i, node in enumerate(self.nodes):
                     if not mask[i] and self.graph.probability(node, p) > self.config.commit_tau:
                         mask[i] = True
         self._class_cache[cls_name] = mask
         return mask
+
+    def _committed(self, predicate: str) -> np.ndarray | None:
+        """``graph.probability(v, predicate) > commit_tau`` for every node, read straight from a
+        SceneGraph's belief table: nodes without evidence sit at the prior mean. None for other
+        graphs (or a SceneGraph subclass that overrides ``probability``): the caller asks node by node."""
+        from sgbelief.graph.provenance import ProvenanceStore
+        from sgbelief.graph.scene_graph import SceneGraph
+
+        g = self.graph
+        prov = getattr(g, "provenance", None)
+        if not (isinstance(g, SceneGraph) and type(g).probability is SceneGraph.probability
+                and type(prov) is ProvenanceStore):
+            return None
+        self._build()
+        if self.nodes:
+            g.check_predicate(predicate)  # what probability() raises for a predicate outside the vocabulary
+        tau = self.config.commit_tau
+        a0, b0 = prov.prior_alpha, prov.prior_beta
+        out = np.full(len(self.nodes), a0 / (a0 + b0) > tau, dtype=bool)
+        index_of = self.index.get
+        rows: list[int] = []
+        values: list[bool] = []
+        for (node, p), log in prov._pairs.items():
+            if p == predicate:
+                i = index_of(node)
+                if i is not None:
+                    rows.append(i)
+                    a = log.alpha
+                    values.append(a / (a + log.beta) > tau)
+        if rows:
+            out[rows] = values
+        return out
 
     def _class_trees(self, cls_name: str) -> dict[Any, tuple[Any, np.ndarray, float]]:
         trees = self._tree_cache.get(cls_name)
@@ -357,6 +447,54 @@ class GeometryContext:
             if dj <= distance:
                 out.append((self.nodes[int(j)], float(dj)))
         return out
+
+    def has_neighbour_of_class(self, node: Any, cls_name: str, distance: float) -> bool:
+        """``bool(neighbours_of_class(node, cls_name, distance))``, computed for the node's whole
+        scene at its first query (one KD-tree ball query over the scene's boxes, the same box
+        distance test) and cached."""
+        i = self.idx(node)
+        if not self.has_box[i]:
+            return False
+        key = (cls_name, distance)
+        cached = self._near_cache.get(key)
+        if cached is None:
+            cached = self._near_cache[key] = (np.zeros(len(self.nodes), dtype=bool), set())
+        near, done = cached
+        scene = self.scenes[i]
+        if scene not in done:
+            self._near_scene(scene, cls_name, distance, near)
+            done.add(scene)
+        return bool(near[i])
+
+    def _near_scene(self, scene: Any, cls_name: str, distance: float, near: np.ndarray) -> None:
+        """near[i] for every boxed node i of the scene, as :meth:`neighbours_of_class` decides it:
+        candidates from a ball around the box centre of radius distance + own half-diagonal +
+        the class's largest half-diagonal (+1e-9), then the exact box-to-box distance <= distance."""
+        entry = self._class_trees(cls_name).get(scene)
+        if entry is None:
+            return
+        tree, members, radius = entry
+        ix = self.groups[scene]
+        q = ix[self.has_box[ix]]
+        if q.size == 0:
+            return
+        lo_q, hi_q = self.lo[q], self.hi[q]
+        # (rounding in the radius cannot change the answer: a box within ``distance`` lies within
+        # distance + both half-diagonals of the centre, far inside the 1e-9 margin, and every
+        # candidate then gets the exact test)
+        own = np.linalg.norm(hi_q - lo_q, axis=1) / 2.0
+        cand = tree.query_ball_point((lo_q + hi_q) / 2.0, distance + own + radius + 1e-9)
+        counts = np.fromiter(map(len, cand), dtype=np.intp, count=len(cand))
+        if not counts.any():
+            return
+        flat = np.fromiter(chain.from_iterable(cand), dtype=np.intp, count=int(counts.sum()))
+        qi = np.repeat(np.arange(q.size), counts)
+        js = members[flat]
+        keep = js != q[qi]
+        js, qi = js[keep], qi[keep]
+        gap = np.maximum(0.0, np.maximum(self.lo[js] - hi_q[qi], lo_q[qi] - self.hi[js]))
+        d = np.sqrt((gap * gap).sum(axis=1))
+        near[q[np.unique(qi[d <= distance])]] = True
 
     # -- support ("on") ------------------------------------------------------------------------
     def _build_on(self) -> None:
@@ -571,9 +709,10 @@ register_relation = DEFAULT_REGISTRY.register
 # --------------------------------------------------------------------------------------------
 def _near_factory(cls_name: str) -> PredicateFn:
     def is_near(ctx: GeometryContext, node: Any) -> bool | None:
-        if ctx.box(node) is None:
+        i = ctx.idx(node)  # (builds the arrays)
+        if not ctx.has_box[i]:
             return None
-        return bool(ctx.neighbours_of_class(node, cls_name, ctx.config.near_distance))
+        return ctx.has_neighbour_of_class(node, cls_name, ctx.config.near_distance)
 
     is_near.__doc__ = f"Box distance <= near_distance to another node of class {cls_name!r}."
     return is_near
