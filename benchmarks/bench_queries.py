@@ -53,7 +53,8 @@ def build_map(n_nodes: int, seed: int = 0):
             g.add_node(node, bbox=((x, y, 0), (x + 4, y + 2, 1.5)), label=lab, scene=scene, track=track,
                        road_distance_px=rng.uniform(0, 200), on_sidewalk=rng.random() < 0.4,
                        at_intersection=rng.random() < 0.3, visible_in_drive_direction=rng.random() < 0.5)
-        for pred in {pred_of.get(lab, rng.choice(decoys)), rng.choice(decoys)}:
+        # (distinct, in draw order: a set's order would follow the per-process string hashes)
+        for pred in dict.fromkeys((pred_of.get(lab, rng.choice(decoys)), rng.choice(decoys))):
             a = rng.uniform(0, 8)
             g.provenance.record(node, pred, f"e{ev}", 0, a, 8 - a)
             ev += 1
