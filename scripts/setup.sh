@@ -26,4 +26,10 @@ if ! "$VENV/bin/python" -c "import torch" >/dev/null 2>&1; then
 fi
 echo "[setup] installing sgbelief and its dependencies"
 $PIP install -q -e ".[all,dev]"
+# Ray (the optional extra sgbelief[ray], for --executor ray): best effort, so that the tests run
+# the executor in Ray's local mode wherever it installs; they skip where it does not.
+if ! "$VENV/bin/python" -c "import ray" >/dev/null 2>&1; then
+    echo "[setup] installing ray (optional: --executor ray)"
+    $PIP install -q "ray>=2.9" || echo "[setup] warning: ray did not install; --executor ray and its tests are unavailable" >&2
+fi
 "$VENV/bin/python" -c "import sgbelief, sys; print('[setup] sgbelief', sgbelief.__version__, 'ready on Python', sys.version.split()[0])"
