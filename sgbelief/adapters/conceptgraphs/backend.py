@@ -6,9 +6,8 @@ import contextlib
 import gc
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -21,8 +20,7 @@ DEFAULT_LABEL_KEY = "geometric_label"
 DetectionLabelFn = Callable[[dict, Any, int], "str | None"]
 
 
-@dataclass(frozen=True)
-class Claim:
+class Claim(NamedTuple):
     """One per-detection claim read from a ConceptGraphs object dict."""
 
     class_id: int | None
@@ -373,9 +371,10 @@ class ConceptGraphsBackend:
         best, best_p = None, self.tau
         preds = sorted(self._predicates_of(node))
         if self._mean_is_probability:
-            mean = self.graph.provenance.mean
+            alpha_beta = self.graph.provenance.alpha_beta
             for pred in preds:
-                p = mean(node, pred)
+                a, b = alpha_beta(node, pred)
+                p = a / (a + b)  # the belief mean, as ProvenanceStore.mean computes it
                 if p > best_p:
                     best, best_p = pred, p
             return best
