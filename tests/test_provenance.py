@@ -169,3 +169,21 @@ def test_remembered_ids_are_bounded_and_resizable() -> None:
     assert s.is_compacted("e7") and not s.is_compacted("e1")
     s.remember_compacted = 2
     assert list(s._compacted_order) == ["e6", "e7"]
+
+
+def test_retracted_entry_does_not_hold_the_compaction_horizon_back() -> None:
+    """An entry recorded after a later-stamped one that was retracted is folded once it is older
+    than the horizon: the dead entry in the timeline does not stop the scan (and a loaded copy,
+    which no longer holds it, folds the same entries)."""
+    store = ProvenanceStore()
+    store.record("a", "is_car", "late", 5, 1.0, 0.0)
+    store.record("a", "is_car", "early", 1, 2.0, 0.0)  # time goes back (replayed / merged logs)
+    store.retract("late")
+    assert store.compact(3) == 1
+    assert [e.status for e in store.entries("a", "is_car")] == [EntryStatus.COMPACTED]
+    assert store.alpha_beta("a", "is_car") == (3.0, 1.0)
+    # a young live entry still holds older entries behind it back (the timeline is scanned in order)
+    store.record("b", "is_car", "young", 9, 1.0, 0.0)
+    store.record("b", "is_car", "old", 2, 1.0, 0.0)
+    assert store.compact(4) == 0
+    assert store.compact(10) == 2

@@ -558,18 +558,23 @@ class ProvenanceStore:
         records older than the horizon are folded without being materialised when that is
         exactly what materialising them first would give (see :meth:`_old_journal`); otherwise
         the journal is materialised first. Returns the number of entries folded.
+
+        The timeline is scanned in arrival order up to the first live entry not older than the
+        horizon: when times go back (replayed or merged logs), entries behind it wait for a later
+        pass. Dead entries (retracted) hold nothing back, so a loaded copy, which no longer holds
+        them, folds the same entries.
         """
         timeline = self._timeline
-        n_old = 0  # the timeline's prefix older than the horizon
+        n_old = 0  # the timeline's prefix older than the horizon (dead entries, e.g. retracted, hold nothing back)
         for entry in timeline:
-            if entry.t >= before_t:
+            if entry.t >= before_t and entry.alive:
                 break
             n_old += 1
         raws = self._old_journal(before_t, n_old == len(timeline))
         if raws is None:  # the journal cannot be folded as it stands
             self.materialize()
             for entry in islice(timeline, n_old, None):
-                if entry.t >= before_t:
+                if entry.t >= before_t and entry.alive:
                     break
                 n_old += 1
             raws = []
