@@ -144,3 +144,36 @@ def test_remove_node_drops_beliefs() -> None:
     g.provenance.record("chair1", "is_chair", "e1", 0, 1.0, 0.0)
     g.remove_node("chair1")
     assert "chair1" not in g and g.evidence_count() == 0
+
+
+def test_probabilities_is_probability_per_node() -> None:
+    from sgbelief.errors import UnknownNodeError, UnknownPredicateError
+
+    g = SceneGraph(vocabulary={"is_car", "is_chair"})
+    for n in ("a", "b", 7):
+        g.add_node(n)
+    g.provenance.record("a", "is_car", "e1", 0, 2.0, 0.5)
+    g.provenance.record(7, "is_car", "e2", 0, 0.25, 3.0)
+    nodes = ["a", "b", 7, "a"]
+    assert g.probabilities(nodes, "is_car") == [g.probability(n, "is_car") for n in nodes]
+    assert g.probabilities(iter(nodes), "is_chair") == [0.5] * 4
+    assert g.probabilities([], "is_nothing") == []
+    assert g.provenance.means(nodes, "is_car") == [g.provenance.mean(n, "is_car") for n in nodes]
+    assert dict(g.provenance.means_with("is_car")) == {"a": g.probability("a", "is_car"), 7: g.probability(7, "is_car")}
+    with pytest.raises(UnknownPredicateError):
+        g.probabilities(["a"], "is_boat")
+    with pytest.raises(UnknownNodeError):
+        g.probabilities(["a", "zzz"], "is_car")
+    with pytest.raises(UnknownNodeError):
+        g.probabilities(["zzz"], "is_boat")  # the node is checked first, as probability() does
+    with pytest.raises(UnknownNodeError):
+        g.probabilities(["a", ["unhashable"]], "is_car")
+
+    class Shifted(SceneGraph):
+        def probability(self, node, predicate):  # noqa: ANN001, ANN201
+            return 1.0 - super().probability(node, predicate)
+
+    h = Shifted()
+    h.add_node("a")
+    h.provenance.record("a", "is_car", "e1", 0, 2.0, 0.5)
+    assert h.probabilities(["a"], "is_car") == [h.probability("a", "is_car")]

@@ -301,6 +301,28 @@ class ProvenanceStore:
     def nodes_with(self, predicate: str) -> Iterator[Any]:
         return (n for (n, p) in self._pairs if p == predicate)
 
+    def means(self, nodes: Iterable[Any], predicate: str) -> list[float]:
+        """:meth:`mean` of (node, predicate) for each node, in order (the prior mean without evidence)."""
+        if type(self).mean is not ProvenanceStore.mean or type(self).alpha_beta is not ProvenanceStore.alpha_beta:
+            return [self.mean(n, predicate) for n in nodes]
+        get = self._pairs.get
+        prior = self.prior_alpha / (self.prior_alpha + self.prior_beta)
+        out: list[float] = []
+        for node in nodes:
+            log = get((node, predicate))
+            if log is None:
+                out.append(prior)
+            else:
+                a = log.alpha
+                out.append(a / (a + log.beta))
+        return out
+
+    def means_with(self, predicate: str) -> Iterator[tuple[Any, float]]:
+        """(node, :meth:`mean`) for every node with evidence on ``predicate``."""
+        if type(self).mean is not ProvenanceStore.mean or type(self).alpha_beta is not ProvenanceStore.alpha_beta:
+            return ((n, self.mean(n, predicate)) for n in self.nodes_with(predicate))
+        return ((n, log.alpha / (log.alpha + log.beta)) for (n, p), log in self._pairs.items() if p == predicate)
+
     def pending(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
         return list(self._pending_by_pair.get((node, predicate), ()))
 

@@ -168,6 +168,26 @@ class SceneGraph:
         self.check_predicate(predicate)
         return self.provenance.mean(node, predicate)
 
+    def probabilities(self, nodes: Iterable[NodeId], predicate: str) -> list[float]:
+        """:meth:`probability` of each node, in order, with the same checks and errors (the
+        predicate checked once): the bulk read a query over many nodes makes."""
+        nodes = list(nodes)
+        if type(self).probability is not SceneGraph.probability:
+            return [self.probability(n, predicate) for n in nodes]
+        if not nodes:
+            return []
+        self._require(nodes[0])
+        self.check_predicate(predicate)
+        contains = self.nx._node.__contains__
+        for n in nodes:
+            try:
+                known = contains(n)
+            except TypeError:  # unhashable: not a node (as ``node in graph`` says)
+                known = False
+            if not known:
+                raise UnknownNodeError(n)
+        return self.provenance.means(nodes, predicate)
+
     def beliefs(self, node: NodeId) -> dict[str, BetaBelief]:
         """All beliefs of a node that have evidence, by predicate."""
         self._require(node)

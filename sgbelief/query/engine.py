@@ -215,53 +215,31 @@ class QueryEngine:
         return s
 
     def belief(self, node: Any, predicate: str) -> float:
-        cache = self._prob.setdefault(predicate, {})
-        p = cache.get(node)
-        if p is None:
-            p = float(self.probability_fn(node, predicate))
-            cache[node] = p
-            self.belief_reads += 1
-        return p
+        """The node's probability for ``predicate`` (``probability_fn``), cached."""
+        return self.belief_many(predicate, (node,))[0]
 
     def geometric(self, node: Any, name: str) -> bool | None:
+        """The geometric predicate ``name`` on the node, cached (see :meth:`geometric_many`)."""
         return self.geometric_many(name, (node,))[0]
 
     def belief_many(self, predicate: str, nodes: Iterable[Any]) -> list[float]:
-        """:meth:`belief` of each node, in order. For a SceneGraph read through its own
-        ``probability``, the means come straight from the belief table (the first read goes
-        through ``probability``, which raises for an unknown predicate or node)."""
+        """:meth:`belief` of each node, in order (each node read once, then cached). When the
+        engine reads the graph's own ``probability``, the uncached nodes go through the graph's
+        bulk ``probabilities`` (same values and errors, the predicate checked once)."""
         cache = self._prob.setdefault(predicate, {})
-        fn = self.probability_fn
-        table = self._belief_table()
-        checked = False
-        out: list[float] = []
-        for node in nodes:
-            p = cache.get(node)
-            if p is None:
-                if checked and table is not None and node in table[0]:
-                    log = table[1]((node, predicate))
-                    a, b = (table[2], table[3]) if log is None else (log.alpha, log.beta)
-                    p = float(a / (a + b))
-                else:
-                    p = float(fn(node, predicate))
-                    checked = True
-                cache[node] = p
-                self.belief_reads += 1
-            out.append(p)
-        return out
-
-    def _belief_table(self) -> tuple[Any, Callable[[Any], Any], float, float] | None:
-        """(node dict, pair -> belief lookup, prior alpha, prior beta) when ``probability_fn`` is a
-        plain SceneGraph's own ``probability`` (mean = alpha / (alpha + beta), Eq. 5), else None."""
-        from sgbelief.graph.provenance import ProvenanceStore
-        from sgbelief.graph.scene_graph import SceneGraph
-
-        fn, g = self.probability_fn, self.graph
-        prov = getattr(g, "provenance", None)
-        if not (getattr(fn, "__self__", None) is g and getattr(fn, "__func__", None) is SceneGraph.probability
-                and type(prov) is ProvenanceStore):
-            return None
-        return g.nx._node, prov._pairs.get, prov.prior_alpha, prov.prior_beta
+        nodes = nodes if isinstance(nodes, (list, tuple)) else list(nodes)
+        todo = [n for n in dict.fromkeys(nodes) if n not in cache]
+        if todo:
+            fn = self.probability_fn
+            bulk = getattr(self.graph, "probabilities", None)
+            if bulk is not None and getattr(fn, "__self__", None) is self.graph and getattr(fn, "__name__", "") == "probability":
+                values = bulk(todo, predicate)
+            else:
+                values = [fn(n, predicate) for n in todo]
+            for n, p in zip(todo, values):
+                cache[n] = float(p)
+            self.belief_reads += len(todo)
+        return [cache[n] for n in nodes]
 
     def geometric_many(self, name: str, nodes: Iterable[Any]) -> list[bool | None]:
         """The geometric predicate ``name`` on each node, in order (cached): a precomputed

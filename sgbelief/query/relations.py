@@ -375,33 +375,28 @@ class GeometryContext:
         return mask
 
     def _committed(self, predicate: str) -> np.ndarray | None:
-        """``graph.probability(v, predicate) > commit_tau`` for every node, read straight from a
-        SceneGraph's belief table: nodes without evidence sit at the prior mean. None for other
-        graphs (or a SceneGraph subclass that overrides ``probability``): the caller asks node by node."""
-        from sgbelief.graph.provenance import ProvenanceStore
+        """``graph.probability(v, predicate) > commit_tau`` for every node, from the belief table
+        of a SceneGraph whose ``probability`` is the belief mean (nodes without evidence sit at the
+        prior mean). None for other graphs: the caller asks node by node."""
         from sgbelief.graph.scene_graph import SceneGraph
 
         g = self.graph
-        prov = getattr(g, "provenance", None)
-        if not (isinstance(g, SceneGraph) and type(g).probability is SceneGraph.probability
-                and type(prov) is ProvenanceStore):
+        if not (isinstance(g, SceneGraph) and type(g).probability is SceneGraph.probability):
             return None
         self._build()
         if self.nodes:
             g.check_predicate(predicate)  # what probability() raises for a predicate outside the vocabulary
         tau = self.config.commit_tau
-        a0, b0 = prov.prior_alpha, prov.prior_beta
-        out = np.full(len(self.nodes), a0 / (a0 + b0) > tau, dtype=bool)
+        prov = g.provenance
+        out = np.full(len(self.nodes), prov.prior_alpha / (prov.prior_alpha + prov.prior_beta) > tau, dtype=bool)
         index_of = self.index.get
         rows: list[int] = []
         values: list[bool] = []
-        for (node, p), log in prov._pairs.items():
-            if p == predicate:
-                i = index_of(node)
-                if i is not None:
-                    rows.append(i)
-                    a = log.alpha
-                    values.append(a / (a + log.beta) > tau)
+        for node, p in prov.means_with(predicate):
+            i = index_of(node)
+            if i is not None:
+                rows.append(i)
+                values.append(p > tau)
         if rows:
             out[rows] = values
         return out
