@@ -158,3 +158,27 @@ def test_a_subclass_that_overrides_update_gets_it_from_update_many_and_replay(na
     run = make_runs([Counting(CONFIG, TABLE)], TABLE, CONFIG)[0]
     replay(recs, [run])
     assert run.operator.calls == 600  # type: ignore[attr-defined]
+
+
+
+def test_split_without_a_value_gives_the_clear_error() -> None:
+    """A rule whose ``_split`` gives no (p, q) for a claim and that has no ``_increment`` fails the
+    same way on every path (NotImplementedError naming the class), not with an unpacking error."""
+    from sgbelief.fusion.events import EvidenceEvent
+    from sgbelief.fusion.operators.base import BaseOperator
+
+    class Partial(BaseOperator):
+        name = "partial"
+
+        def _split(self, c: float):  # noqa: ANN202
+            return None if c < 0.3 else (c, 1.0 - c)
+
+    ok = EvidenceEvent(targets={"a": 1.0}, predicate="is_car", confidence=0.9, t=0, id="e0")
+    bad = EvidenceEvent(targets={"a": 1.0}, predicate="is_car", confidence=0.2, t=1, id="e1")
+    for run in (lambda op, g: op.update_many(g, [(ok, None), (bad, None)]),
+                lambda op, g: [op.update(g, e, None, report=False) for e in (ok, bad)],
+                lambda op, g: [op.update(g, e, None) for e in (ok, bad)]):
+        op, g = Partial(), SceneGraph()
+        with pytest.raises(NotImplementedError, match="Partial"):
+            run(op, g)
+        assert g.provenance.alpha_beta("a", "is_car") == (1.9, 1.1) and op.stats["events"] == 1

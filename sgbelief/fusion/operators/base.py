@@ -237,8 +237,10 @@ class BaseOperator:
                     res = tick(graph, t)
                     if res:
                         out += res
-                if linear:
-                    p, q = split_of(c)  # type: ignore[misc]
+                split = split_of(c) if linear else None  # None: this claim takes the general rule
+                lin = split is not None
+                if lin:
+                    p, q = split  # type: ignore[misc]
                 e_targets = e_below = e_committed = 0
                 for node, mass in event.targets.items():
                     e_targets += 1
@@ -247,7 +249,7 @@ class BaseOperator:
                         continue
                     if node not in gnx:
                         graph.ensure_node(node)
-                    if linear:
+                    if lin:
                         da = mass * p
                         db = mass * q
                     else:
