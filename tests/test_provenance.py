@@ -187,3 +187,30 @@ def test_retracted_entry_does_not_hold_the_compaction_horizon_back() -> None:
     store.record("b", "is_car", "old", 2, 1.0, 0.0)
     assert store.compact(4) == 0
     assert store.compact(10) == 2
+
+
+_journal_ids = st.lists(st.sampled_from(["e0", "e1", "e2", "e3", "e4", None]), max_size=40)
+
+
+@given(_journal_ids, st.data())
+def test_retired_ids_by_last_record_equal_the_count_down(ids, data) -> None:
+    """A compaction pass retires a journaled id at its last folded record. The pass over journal
+    records only finds the order from each id's last position; the general pass counts each id's
+    records down pair by pair. Both give the same ids in the same order."""
+    raws = [(("v", "is_car"), eid, 0, 1.0, 0.0, 1) for eid in ids]
+    cuts = sorted(data.draw(st.lists(st.integers(0, len(raws)), max_size=6)))
+    bounds = [0, *cuts, len(raws)]
+    groups = [raws[a:b] for a, b in zip(bounds, bounds[1:]) if b > a]
+    fast = ProvenanceStore._retired_ids([], [(0, g) for g in groups], raws, True)
+    assert len(set(fast)) == len(fast) and None not in fast
+    assert set(fast) == {i for i in ids if i is not None}
+    # the same pass where a first pair's materialised entries retired an id outside the journal,
+    # and a last pair with no journal record retired another: the general count-down
+    general = ProvenanceStore._retired_ids(["x", "z"], [(1, g) for g in groups], raws, True)
+    assert general == ["x", *fast, "z"]
+    # an id whose records are not all folded (a pair the pass skipped) is not retired
+    if groups:
+        kept = groups[:-1]
+        partial = ProvenanceStore._retired_ids(["x"], [(1, g) for g in kept], raws, False)
+        seen = [r[1] for g in kept for r in g]
+        assert partial == ["x", *[i for i in fast if i in seen and seen.count(i) == ids.count(i)]]

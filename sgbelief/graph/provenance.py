@@ -86,6 +86,8 @@ _DEFERRED: JournalRecord = ((None, ""), None, -1, 0.0, 0.0, 0)
 _rec_key = itemgetter(0)
 _rec_eid = itemgetter(1)
 _rec_t = itemgetter(2)
+_rec_da = itemgetter(3)
+_rec_db = itemgetter(4)
 
 
 class ProvenanceEntry:
@@ -608,12 +610,8 @@ class ProvenanceStore:
         else:
             popleft = timeline.popleft
             old = [popleft() for _ in range(n_old)]
-        # pairs in the order their oldest entry past the horizon arrived (journal records arrived
-        # after every timeline entry)
-        dirty = dict.fromkeys(chain([(e.node, e.predicate) for e in old if e.alive], map(_rec_key, raws)))
-        # the old journal records by pair, and how many of each event id are folded
+        # the old journal records by pair, in the order each pair's first record arrived
         groups: dict[PairKey, list[JournalRecord]] = {}
-        remaining: Counter[str | None] = Counter()
         if raws:
             group_of = groups.get
             for rec in raws:
@@ -622,32 +620,46 @@ class ProvenanceStore:
                     groups[rec[0]] = [rec]
                 else:
                     grp.append(rec)
-            remaining.update(map(_rec_eid, raws))
-            remaining.pop(None, None)  # entries without an id are never remembered
+        # pairs in the order their oldest entry past the horizon arrived (journal records arrived
+        # after every timeline entry)
+        dirty = dict.fromkeys(chain([(e.node, e.predicate) for e in old if e.alive], groups))
         pairs_get = self._pairs.get
         by_event = self._by_event
+        # the ids the folded entries took out of the event index, in order, and per pair with
+        # journal records: how many of those ids came before its records, and the records (their
+        # ids are gone with the last of their records)
         gone: list[str] = []
+        marks: list[tuple[int, list[JournalRecord]]] = []
+        all_recs_seen = True
         folded_total = 0
         refused, quarantined, compacted = _REFUSED, _QUARANTINED, _COMPACTED
         counted_ids = _COUNTED_IDS
         fsum = math.fsum
         for key in dirty:
             log = pairs_get(key)
+            recs = groups.get(key) if raws else None  # journal records come after every entry
             if log is None:
+                if recs:
+                    all_recs_seen = False
                 continue
             # fold this pair's settled entries older than before_t into its compacted bucket
-            keep: list[ProvenanceEntry] = []
+            entries = log.entries
             fold: list[ProvenanceEntry] = []
-            bucket: ProvenanceEntry | None = None
-            for entry in log.entries:
-                st = entry.status
-                if st is compacted:
-                    bucket = entry
-                elif entry.t < before_t and st is not refused and st is not quarantined:
-                    fold.append(entry)
-                else:
-                    keep.append(entry)
-            recs = groups.get(key) if raws else None  # journal records come after every entry
+            if not entries:
+                keep: list[ProvenanceEntry] | None = []
+                bucket: ProvenanceEntry | None = None
+            elif len(entries) == 1 and entries[0].status is compacted:  # only the bucket: kept as is
+                keep, bucket = None, entries[0]
+            else:
+                keep, bucket = [], None
+                for entry in entries:
+                    st = entry.status
+                    if st is compacted:
+                        bucket = entry
+                    elif entry.t < before_t and st is not refused and st is not quarantined:
+                        fold.append(entry)
+                    else:
+                        keep.append(entry)
             n_fold = len(fold) + len(recs) if recs else len(fold)
             if not n_fold:
                 continue
@@ -662,11 +674,16 @@ class ProvenanceStore:
                 else:
                     _, _, t_max, d_alpha, d_beta, _ = recs[0]  # type: ignore[index]
                     d_alpha, d_beta, n = d_alpha + 0.0, d_beta + 0.0, 1
+            elif not fold:  # journal records only (committed: all counted), in time order
+                assert recs is not None
+                d_alpha = fsum(map(_rec_da, recs))
+                d_beta = fsum(map(_rec_db, recs))
+                n, t_max = len(recs), recs[-1][2]
             else:  # one loop, not four comprehensions (each costs a function call in CPython 3.11)
                 das: list[float] = []
                 dbs: list[float] = []
                 n = 0
-                t_max = fold[0].t if fold else recs[0][2]  # type: ignore[index]
+                t_max = fold[0].t
                 for e in fold:
                     if id(e.status) in counted_ids:
                         das.append(e.d_alpha)
@@ -675,11 +692,10 @@ class ProvenanceStore:
                     if e.t > t_max:
                         t_max = e.t
                 if recs:
-                    for rec in recs:  # committed: all counted
-                        das.append(rec[3])
-                        dbs.append(rec[4])
-                        if rec[2] > t_max:
-                            t_max = rec[2]
+                    das += map(_rec_da, recs)
+                    dbs += map(_rec_db, recs)
+                    if recs[-1][2] > t_max:
+                        t_max = recs[-1][2]
                     n += len(recs)
                 d_alpha = fsum(das)
                 d_beta = fsum(dbs)
@@ -709,17 +725,14 @@ class ProvenanceStore:
                         if not same_event:
                             del by_event[eid]
                             gone.append(eid)
-            if recs:  # an id is gone with the last of its records (none is in the event index)
-                for rec in recs:
-                    eid = rec[1]
-                    left = remaining[eid]  # 0 for None
-                    if left == 1:
-                        gone.append(eid)  # type: ignore[arg-type]
-                    else:
-                        remaining[eid] = left - 1
-            keep.insert(0, bucket)
-            log.entries = keep
+            if recs:
+                marks.append((len(gone), recs))
+            if keep is not None:
+                keep.insert(0, bucket)
+                log.entries = keep
             folded_total += n_fold
+        if raws:
+            gone = self._retired_ids(gone, marks, raws, all_recs_seen)
         if raws:
             journal = self._journal
             del journal[: len(raws)]
@@ -732,6 +745,40 @@ class ProvenanceStore:
         if gone:
             self._compacted_order.extend(gone)
         return folded_total
+
+    @staticmethod
+    def _retired_ids(
+        entry_ids: list[str], marks: list[tuple[int, list[JournalRecord]]], raws: list[JournalRecord], all_recs_seen: bool
+    ) -> list[str]:
+        """The event ids a compaction pass that folds journal records retires, in the order it
+        folds them. Per folded pair, in order: the ids its entries took out of the event index
+        (``entry_ids[i:j]`` for consecutive marks), then each journal id whose last record is among
+        the pair's records (``marks``: (j, records)); the journal holds no id of the index. An id
+        with records in a pair the pass skipped (``all_recs_seen`` false) is not retired."""
+        if all_recs_seen and not entry_ids:
+            # journal records only: each id is retired at its last record, in that order
+            seq = list(map(_rec_eid, chain.from_iterable([recs for _, recs in marks])))
+            last_first = dict.fromkeys(reversed(seq))
+            last_first.pop(None, None)  # type: ignore[call-overload]  # entries without an id are never remembered
+            gone = list(last_first)
+            gone.reverse()
+            return gone
+        remaining: Counter[str | None] = Counter(map(_rec_eid, raws))
+        remaining.pop(None, None)
+        gone: list[str] = []  # type: ignore[no-redef]
+        done = 0
+        for upto, recs in marks:
+            gone += entry_ids[done:upto]
+            done = upto
+            for rec in recs:
+                eid = rec[1]
+                left = remaining[eid]  # 0 for None
+                if left == 1:
+                    gone.append(eid)  # type: ignore[arg-type]
+                else:
+                    remaining[eid] = left - 1
+        gone += entry_ids[done:]
+        return gone
 
     def _old_journal(self, before_t: int, timeline_all_old: bool) -> list[JournalRecord] | None:
         """The journal records a compaction at ``before_t`` folds, when folding them unmaterialised
