@@ -25,14 +25,13 @@ class OverwriteOperator(BaseOperator):
         self._strength = self.config.baselines.overwrite.strength
 
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
-        s = self._strength
         prov = graph.provenance
-        a, b = prov.alpha_beta(node, predicate)
+        pa, pb = prov.prior_alpha, prov.prior_beta
+        log = prov._pairs.get((node, predicate))  # = prov.alpha_beta, without the method call
+        a, b = (pa, pb) if log is None else (log.alpha, log.beta)
         if c >= 0.5:
-            ta, tb = prov.prior_alpha + s, prov.prior_beta
-        else:
-            ta, tb = prov.prior_alpha, prov.prior_beta + s
-        return ta - a, tb - b
+            return pa + self._strength - a, pb - b
+        return pa - a, pb + self._strength - b
 
 
 class MajorityVoteOperator(BaseOperator):
