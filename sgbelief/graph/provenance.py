@@ -83,7 +83,6 @@ JournalRecord = tuple[PairKey, "str | None", int, float, float, int]
 #: the journal's first record while a loader's entries are deferred (see defer_entries): every
 #: reader that materialises a non-empty journal then builds them first
 _DEFERRED: JournalRecord = ((None, ""), None, -1, 0.0, 0.0, 0)
-_rec_key = itemgetter(0)
 _rec_eid = itemgetter(1)
 _rec_t = itemgetter(2)
 _rec_da = itemgetter(3)
@@ -675,10 +674,9 @@ class ProvenanceStore:
                     _, _, t_max, d_alpha, d_beta, _ = recs[0]  # type: ignore[index]
                     d_alpha, d_beta, n = d_alpha + 0.0, d_beta + 0.0, 1
             elif not fold:  # journal records only (committed: all counted), in time order
-                assert recs is not None
-                d_alpha = fsum(map(_rec_da, recs))
-                d_beta = fsum(map(_rec_db, recs))
-                n, t_max = len(recs), recs[-1][2]
+                d_alpha = fsum(map(_rec_da, recs))  # type: ignore[arg-type]
+                d_beta = fsum(map(_rec_db, recs))  # type: ignore[arg-type]
+                n, t_max = len(recs), recs[-1][2]  # type: ignore[arg-type, index]
             else:  # one loop, not four comprehensions (each costs a function call in CPython 3.11)
                 das: list[float] = []
                 dbs: list[float] = []
@@ -733,7 +731,6 @@ class ProvenanceStore:
             folded_total += n_fold
         if raws:
             gone = self._retired_ids(gone, marks, raws, all_recs_seen)
-        if raws:
             journal = self._journal
             del journal[: len(raws)]
             self._j_checked -= len(raws)
@@ -760,12 +757,12 @@ class ProvenanceStore:
             seq = list(map(_rec_eid, chain.from_iterable([recs for _, recs in marks])))
             last_first = dict.fromkeys(reversed(seq))
             last_first.pop(None, None)  # type: ignore[call-overload]  # entries without an id are never remembered
-            gone = list(last_first)
-            gone.reverse()
-            return gone
+            order = list(last_first)
+            order.reverse()
+            return order
         remaining: Counter[str | None] = Counter(map(_rec_eid, raws))
         remaining.pop(None, None)
-        gone: list[str] = []  # type: ignore[no-redef]
+        gone: list[str] = []
         done = 0
         for upto, recs in marks:
             gone += entry_ids[done:upto]
