@@ -53,3 +53,22 @@ def test_large_map_benchmark_round_trips_and_reports_every_step(tmp_path: Path) 
     for step in ("npz_save", "npz_load", "objects_floor", "npz_materialize", "json_save", "json_load"):
         assert res[f"{step}_s"] >= 0
     assert res["npz_load_materialized_json_equiv_mb_per_s"] > 0 and res["objects_floor_json_equiv_mb_per_s"] > 0
+
+
+def test_throughput_benchmark_reports_both_normalisations() -> None:
+    """Smoke test: a subset of operators, events/s and reference iterations per event for each
+    setting; an unknown operator name is refused with the valid names."""
+    script = str(BENCH / "bench_throughput.py")
+    out = subprocess.run(
+        [sys.executable, script, "--operators", "majority", "--repeat", "1", "--scale", "0.1", "--json"],
+        capture_output=True, text=True, check=True, timeout=300,
+    ).stdout
+    res = json.loads(out.strip().splitlines()[-1])
+    assert list(res["operators"]) == ["majority"] and res["reference_loop_events_per_s"] > 0
+    row = res["operators"]["majority"]
+    assert set(row["ref_iterations_per_event"]) == {"report", "no_report", "replay", "many"}
+    assert all(v > 1.0 for v in row["ref_iterations_per_event"].values())  # no operator beats one dict increment
+    assert row["events_per_s_many"] > 0 and 0 < row["ratio_to_ref_many"] < 1
+    bad = subprocess.run([sys.executable, script, "--operators", "majority,nope"], capture_output=True, text=True,
+                         timeout=300)
+    assert bad.returncode == 2 and "nope" in bad.stderr and "comod" in bad.stderr
