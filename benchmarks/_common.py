@@ -1,12 +1,13 @@
-"""Shared helpers of the benchmark scripts: machine facts, RSS, synthetic streams."""
+"""Shared helpers of the benchmark scripts: machine facts, RSS, the reference loop, synthetic streams."""
 
 from __future__ import annotations
 
 import os
 import platform
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -21,6 +22,17 @@ def machine() -> dict[str, object]:
     except OSError:
         pass
     return {"nproc": os.cpu_count(), "cpu": cpu, "python": platform.python_version(), "platform": platform.platform()}
+
+
+def reference_pass(events: Sequence[tuple[Any, Any]], clock: Callable[[], float]) -> float:
+    """Seconds of one pass of the reference loop over ``(event, label)`` pairs: a plain Python loop
+    doing one dict increment per event (the practical limit for per-event Python code)."""
+    d: dict[str, int] = {}
+    t0 = clock()
+    for ev, _lab in events:
+        k = ev.predicate
+        d[k] = d.get(k, 0) + 1
+    return max(clock() - t0, 1e-9)
 
 
 def rss_mb() -> tuple[float, float]:

@@ -25,6 +25,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+# before any checkout is put on sys.path: _common puts this one at its front, and child() then
+# puts the measured checkout in front of it
+from _common import reference_pass
+
 
 def child(tree: str, operator: str, repeat: int, mode: str = "update") -> float:
     """Best (cost per event / reference-loop cost per event) of ``repeat`` timed passes."""
@@ -44,12 +48,7 @@ def child(tree: str, operator: str, repeat: int, mode: str = "update") -> float:
     clock = time.process_time
 
     def ref() -> float:
-        d: dict[str, int] = {}
-        t0 = clock()
-        for ev, _lab in timed:
-            k = ev.predicate
-            d[k] = d.get(k, 0) + 1
-        return clock() - t0
+        return reference_pass(timed, clock)
 
     best = float("inf")
     for _ in range(repeat):
