@@ -302,9 +302,15 @@ class ProvenanceStore:
     def nodes_with(self, predicate: str) -> Iterator[Any]:
         return (n for (n, p) in self._pairs if p == predicate)
 
+    def _plain_means(self) -> bool:
+        """True when ``mean`` is alpha / (alpha + beta) of the stored pair (no subclass overrides
+        ``mean`` or ``alpha_beta``), so bulk reads may take it from the pair logs directly."""
+        cls = type(self)
+        return cls.mean is ProvenanceStore.mean and cls.alpha_beta is ProvenanceStore.alpha_beta
+
     def means(self, nodes: Iterable[Any], predicate: str) -> list[float]:
         """:meth:`mean` of (node, predicate) for each node, in order (the prior mean without evidence)."""
-        if type(self).mean is not ProvenanceStore.mean or type(self).alpha_beta is not ProvenanceStore.alpha_beta:
+        if not self._plain_means():
             return [self.mean(n, predicate) for n in nodes]
         get = self._pairs.get
         prior = self.prior_alpha / (self.prior_alpha + self.prior_beta)
@@ -320,7 +326,7 @@ class ProvenanceStore:
 
     def means_with(self, predicate: str) -> Iterator[tuple[Any, float]]:
         """(node, :meth:`mean`) for every node with evidence on ``predicate``."""
-        if type(self).mean is not ProvenanceStore.mean or type(self).alpha_beta is not ProvenanceStore.alpha_beta:
+        if not self._plain_means():
             return ((n, self.mean(n, predicate)) for n in self.nodes_with(predicate))
         return ((n, log.alpha / (log.alpha + log.beta)) for (n, p), log in self._pairs.items() if p == predicate)
 
