@@ -50,9 +50,10 @@ def test_large_map_benchmark_round_trips_and_reports_every_step(tmp_path: Path) 
     res = json.loads(out.strip().splitlines()[-1])
     assert res["verified_equal"] is True and res["npz_load_deferred"] is True
     assert res["log_entries"] > 0 and res["named_queries"] == len(res["query_s"]) > 0
-    for step in ("npz_save", "npz_load", "objects_floor", "npz_materialize", "json_save", "json_load"):
+    for step in ("npz_save", "save_floor", "npz_load", "objects_floor", "npz_materialize", "json_save", "json_load"):
         assert res[f"{step}_s"] >= 0
     assert res["npz_load_materialized_json_equiv_mb_per_s"] > 0 and res["objects_floor_json_equiv_mb_per_s"] > 0
+    assert res["save_floor_json_equiv_mb_per_s"] > 0
 
 
 def test_throughput_benchmark_reports_both_normalisations() -> None:
