@@ -209,3 +209,14 @@ def _streams(draw: st.DrawFn) -> _Stream:
 def test_random_streams_match_streaming(name: str, stream: _Stream) -> None:
     records, config, store = stream
     _assert_same(records, name, config, **store)
+
+
+@pytest.mark.parametrize("decimals", [1, 2, 4])
+def test_random_records_are_valid_events(decimals: int) -> None:
+    """Rounding the masses never pushes an event's total over 1 (coarse rounding makes that
+    frequent: 38 of 10,000 events did with one decimal before the fix)."""
+    from sgbelief.eval.formats import validate_event
+
+    for seed in range(5):
+        for rec in random_records(seed, 2000, mass_decimals=decimals):
+            validate_event(rec._asdict())

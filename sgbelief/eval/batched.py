@@ -546,7 +546,8 @@ def random_records(
     labels: Sequence[str | None] = ("car", "person", "building", "road", None),
     mass_decimals: int = 4,
 ) -> list[EventRecord]:
-    """A seeded random evidence stream (non-decreasing t) for tests and benchmarks."""
+    """A seeded random evidence stream (non-decreasing t) for tests and benchmarks; every record is
+    a valid event (``validate_event``): masses rounded to ``mass_decimals`` sum to at most 1."""
     rng = np.random.default_rng(seed)
     out: list[EventRecord] = []
     t = 0
@@ -559,6 +560,9 @@ def random_records(
         nodes = rng.choice(n_nodes, size=min(k, n_nodes), replace=False)
         w = rng.dirichlet(np.ones(len(nodes))) * rng.uniform(0.5, 1.0)
         targets = {f"n{int(v):05d}": round(float(m), mass_decimals) for v, m in zip(nodes, w)}
+        if sum(targets.values()) > 1.0:  # rounding up pushed the total over 1: round these down instead
+            scale = 10.0**mass_decimals
+            targets = {n: math.floor(float(m) * scale) / scale for n, m in zip(targets, w)}
         geo = {node: labs[int(rng.integers(len(labs)))] for node in targets}
         out.append(EventRecord(t=t, targets=targets, predicate=preds[int(rng.integers(len(preds)))],
                                confidence=round(float(rng.random()), 6), context="rnd", geometric=geo,
