@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from sgbelief.errors import RetractionError
 from sgbelief.eval.batched import provenance_signature
+from sgbelief.graph import provenance
 from sgbelief.graph.provenance import EntryStatus
 from sgbelief.graph.scene_graph import SceneGraph
 
@@ -104,16 +105,24 @@ def _apply(graph: SceneGraph, ops: list[tuple[Any, ...]], journaled: bool) -> li
 @given(ops=st.one_of(st.lists(_op, max_size=40), _streaming_ops()),
        remember=st.sampled_from([0, 2, 100]))
 def test_journal_is_invisible(ops: list[tuple[Any, ...]], remember: int) -> None:
+    """Journaled, folded record by record; journaled, folded in numpy from the first record
+    (``VECTOR_FOLD_MIN = 1``); and recorded as entries: the same results and stores."""
     graphs = []
     results = []
-    for journaled in (True, False):
+    for journaled, vector_min in ((True, 10**9), (True, 1), (False, 10**9)):
         g = SceneGraph()
         g.provenance.remember_compacted = remember
-        results.append(_apply(g, ops, journaled))
+        saved = provenance.VECTOR_FOLD_MIN
+        provenance.VECTOR_FOLD_MIN = vector_min
+        try:
+            results.append(_apply(g, ops, journaled))
+        finally:
+            provenance.VECTOR_FOLD_MIN = saved
         graphs.append(g)
-    assert results[0] == results[1]
-    assert provenance_signature(graphs[0]) == provenance_signature(graphs[1])
-    assert graphs[0].provenance.to_dict() == graphs[1].provenance.to_dict()
+    for other in (1, 2):
+        assert results[0] == results[other]
+        assert provenance_signature(graphs[0]) == provenance_signature(graphs[other])
+        assert graphs[0].provenance.to_dict() == graphs[other].provenance.to_dict()
 
 
 @pytest.mark.parametrize("ops", [
@@ -193,8 +202,11 @@ def test_nothing_expires_is_exact(ops: list[tuple[Any, ...]], t_cor: int, t_disa
                 queues.expire(prov, t, t_cor=t_cor, k=2.0, t_disagree=t_disagree)
 
 
-def test_long_stream_with_a_reused_id_matches_record() -> None:
-    """Thousands of journaled ids (the id memory is pruned) and an old id reused late."""
+@pytest.mark.parametrize("vector_min", [1, 10**9])
+def test_long_stream_with_a_reused_id_matches_record(vector_min: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Thousands of journaled ids (the id memory is pruned) and an old id reused late, folded
+    in numpy or record by record."""
+    monkeypatch.setattr(provenance, "VECTOR_FOLD_MIN", vector_min)
     ops: list[tuple[Any, ...]] = []
     for i in range(3000):
         ops.append(("commit", _NODES[i % 3], _PREDS[i % 2], "new", 1 if i % 2 else 0, 0.25, 0.5, 1))
@@ -207,6 +219,45 @@ def test_long_stream_with_a_reused_id_matches_record() -> None:
     results = [_apply(graphs[0], ops, True), _apply(graphs[1], ops, False)]
     assert results[0] == results[1]
     assert provenance_signature(graphs[0]) == provenance_signature(graphs[1])
+
+
+def _journal_state(prov: Any) -> Any:
+    return (list(prov._journal), [(k, log.alpha, log.beta, [e.as_tuple() for e in log.entries])
+                                  for k, log in prov._pairs.items()], prov.n_compacted, list(prov._compacted_order))
+
+
+def test_numpy_fold_leaves_a_log_with_more_than_its_bucket_to_the_loop(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A refused entry older than the horizon stays in its log: the numpy fold declines the pass
+    without changing anything, and the loop's result is the record-only store's."""
+    monkeypatch.setattr(provenance, "VECTOR_FOLD_MIN", 1)
+    ops = [("pending", "a", "is_p", "x", 1, 0.5, 0.5, EntryStatus.REFUSED), ("compact", -2)]
+    ops += [("commit", "a", "is_p", "new", 1, 0.25, 0.5, 1), ("commit", "b", "is_p", "new", 0, 0.5, 0.5, 1)] * 3
+    g = SceneGraph()
+    _apply(g, ops, journaled=True)
+    prov = g.provenance
+    assert not prov._timeline and len(prov._journal) == 6 and len(prov._pairs[("a", "is_p")].entries) == 1
+    before = _journal_state(prov)
+    assert prov._fold_journal(list(prov._journal)) is None
+    assert _journal_state(prov) == before
+    test_journal_is_invisible.hypothesis.inner_test(ops=ops + [("compact", -5)], remember=3)  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("vector_min", [1, 10**9])
+def test_fold_errors_and_huge_times_as_the_loop(vector_min: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Increments whose sum overflows raise fsum's OverflowError on either path; times beyond 64
+    bits fold through the loop."""
+    monkeypatch.setattr(provenance, "VECTOR_FOLD_MIN", vector_min)
+    prov = SceneGraph().provenance
+    for t in range(3):
+        prov.commit("a", "is_p", f"e{t}", t, 1e308, 1.0)
+    with pytest.raises(OverflowError):
+        prov.compact(10)
+    big = SceneGraph().provenance
+    for t in range(3):
+        big.commit("a", "is_p", f"e{t}", 2**70 + t, 0.5, 0.25)
+        big.commit("b", "is_p", f"f{t}", 2**70 + t, 0.5, 0.25)
+    assert big.compact(2**71) == 6
+    assert [e.as_tuple() for e in big.entries("a", "is_p")] == [(None, 2**70 + 2, 1.5, 0.75, "compacted")]
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -39,6 +39,8 @@ from operator import eq, itemgetter, le
 from enum import Enum
 from typing import Any, Protocol
 
+import numpy as np
+
 from sgbelief.errors import FormatError, RetractionError
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA, BetaBelief
 
@@ -78,15 +80,29 @@ _COUNTED_IDS = frozenset(id(s) for s in COUNTED)
 _PENDING_IDS = frozenset(id(s) for s in PENDING)
 
 #: fields of a journal record (a committed entry not yet materialised as a ProvenanceEntry):
-#: (pair key, event id, t, d_alpha, d_beta, stance)
-JournalRecord = tuple[PairKey, "str | None", int, float, float, int]
+#: (pair key, event id, t, d_alpha, d_beta, stance, the pair's log). The log is the one the store
+#: holds for the key: whatever removes or replaces a pair's log materialises the journal first.
+JournalRecord = tuple[PairKey, "str | None", int, float, float, int, "_PairLog | None"]
 #: the journal's first record while a loader's entries are deferred (see defer_entries): every
 #: reader that materialises a non-empty journal then builds them first
-_DEFERRED: JournalRecord = ((None, ""), None, -1, 0.0, 0.0, 0)
+_DEFERRED: JournalRecord = ((None, ""), None, -1, 0.0, 0.0, 0, None)
 _rec_eid = itemgetter(1)
 _rec_t = itemgetter(2)
 _rec_da = itemgetter(3)
 _rec_db = itemgetter(4)
+_rec_log = itemgetter(6)
+#: journal records a compaction pass folds from which it groups them by pair in numpy
+#: (:meth:`ProvenanceStore._fold_journal`); smaller passes take the per-record loop
+VECTOR_FOLD_MIN = 128
+
+
+def _last_seen_order(ids: Iterable[str | None]) -> list[str]:
+    """The distinct ids, None left out, each placed where it occurs last."""
+    last_first = dict.fromkeys(reversed(list(ids)))
+    last_first.pop(None, None)  # type: ignore[call-overload]  # entries without an id are never remembered
+    order = list(last_first)
+    order.reverse()
+    return order  # type: ignore[return-value]
 
 
 class ProvenanceEntry:
@@ -410,7 +426,7 @@ class ProvenanceStore:
             log = self._pairs[key] = _PairLog(self.prior_alpha, self.prior_beta)
         log.alpha += d_alpha
         log.beta += d_beta
-        self._journal.append((key, event_id, t, d_alpha, d_beta, stance))
+        self._journal.append((key, event_id, t, d_alpha, d_beta, stance, log))
 
     def materialize(self) -> None:
         """Turn the journal into entries (logs, event index, timeline), exactly as ``record`` would
@@ -427,13 +443,12 @@ class ProvenanceStore:
             assert deferred is not None
             deferred.build(self)
             del journal[0]
-        pairs = self._pairs
         by_event = self._by_event
         tl_append = self._timeline.append
         committed = _COMMITTED
-        for key, eid, t, da, db, stance in journal:
+        for key, eid, t, da, db, stance, log in journal:
             entry = ProvenanceEntry(eid, t, da, db, committed, key[0], key[1], stance)
-            pairs[key].entries.append(entry)
+            log.entries.append(entry)  # type: ignore[union-attr]
             if eid is not None:
                 index_event(by_event, eid, entry)
             tl_append(entry)
@@ -609,6 +624,10 @@ class ProvenanceStore:
             raws = []
         if not n_old and not raws:
             return 0
+        if not n_old and len(raws) >= VECTOR_FOLD_MIN:  # journal records only (the timeline is empty)
+            folded = self._fold_journal(raws)
+            if folded is not None:
+                return folded
         if n_old == len(timeline):
             old = list(timeline)
             timeline.clear()
@@ -677,8 +696,8 @@ class ProvenanceStore:
                         d_alpha = d_beta = 0.0
                     n, t_max = first.n_folded, first.t
                 else:
-                    _, _, t_max, d_alpha, d_beta, _ = recs[0]  # type: ignore[index]
-                    d_alpha, d_beta, n = d_alpha + 0.0, d_beta + 0.0, 1
+                    rec = recs[0]  # type: ignore[index]
+                    t_max, d_alpha, d_beta, n = rec[2], rec[3] + 0.0, rec[4] + 0.0, 1
             elif not fold:  # journal records only (committed: all counted), in time order
                 d_alpha = fsum(map(_rec_da, recs))  # type: ignore[arg-type]
                 d_beta = fsum(map(_rec_db, recs))  # type: ignore[arg-type]
@@ -737,17 +756,106 @@ class ProvenanceStore:
             folded_total += n_fold
         if raws:
             gone = self._retired_ids(gone, marks, raws, all_recs_seen)
-            journal = self._journal
-            del journal[: len(raws)]
-            self._j_checked -= len(raws)
-            if len(self._j_id_t) > 2 * len(journal) + 1024:  # drop the folded ids, in one C pass
-                # (until then a folded id reused later only costs a materialisation)
-                id_t = self._j_id_t = dict(zip(map(_rec_eid, journal), map(_rec_t, journal)))
-                id_t.pop(None, None)  # type: ignore[call-overload]
+            self._drop_folded_records(len(raws))
         self.n_compacted += folded_total
         if gone:
             self._compacted_order.extend(gone)
         return folded_total
+
+    def _drop_folded_records(self, k: int) -> None:
+        """Remove the first ``k`` journal records (folded by a compaction pass)."""
+        journal = self._journal
+        del journal[:k]
+        self._j_checked -= k
+        if len(self._j_id_t) > 2 * len(journal) + 1024:  # drop the folded ids, in one C pass
+            # (until then a folded id reused later only costs a materialisation)
+            id_t = self._j_id_t = dict(zip(map(_rec_eid, journal), map(_rec_t, journal)))
+            id_t.pop(None, None)  # type: ignore[call-overload]
+
+    def _fold_journal(self, raws: list[JournalRecord]) -> int | None:
+        """:meth:`compact` of journal records alone (the timeline is empty), grouped by pair in
+        numpy instead of record by record; returns the number folded.
+
+        The result is the loop's, bit for bit: pairs in the order of their first record; per pair
+        one ``math.fsum`` of its increments (for one value that is the value + 0.0, for two their
+        IEEE sum + 0.0: both correctly rounded, -0.0 turned into 0.0 as fsum does), added to the
+        pair's bucket with one addition; the bucket's t is the last record's (the journal is in
+        time order) and its count grows by the records folded; retired ids as
+        :meth:`_retired_ids` orders them. Returns None, having changed nothing, when a pair's log
+        holds more than its bucket, a time does not fit in 64 bits or a sum is not finite: the
+        loop then takes the pass (and raises where ``math.fsum`` does).
+        """
+        m = len(raws)
+        logs = list(map(_rec_log, raws))
+        try:
+            t = np.fromiter(map(_rec_t, raws), np.int64, m)
+        except OverflowError:
+            return None
+        glogs = list(dict.fromkeys(logs))  # the pairs in the order of their first record
+        k = len(glogs)
+        compacted = _COMPACTED
+        for log in glogs:
+            entries = log.entries  # type: ignore[union-attr]
+            if entries and (len(entries) > 1 or entries[0].status is not compacted):
+                return None
+        da = np.fromiter(map(_rec_da, raws), np.float64, m)
+        db = np.fromiter(map(_rec_db, raws), np.float64, m)
+        if k == m:  # one record per pair: each is its own group, in journal order
+            order: Any = None
+            n = np.ones(m, dtype=np.int64)
+            head = list(range(m))
+            sa, sb, t_last = da + 0.0, db + 0.0, t
+        else:
+            slot = dict(zip(glogs, range(k)))
+            group = np.fromiter(map(slot.__getitem__, logs), np.intp, m)
+            order = np.argsort(group, kind="stable")  # records by pair, journal order within
+            n = np.bincount(group, minlength=k)
+            ends = np.cumsum(n)
+            starts = ends - n
+            head = order[starts].tolist()
+            t_last = t[order[ends - 1]]
+            da, db = da[order], db[order]
+            sa, sb = da[starts], db[starts]
+            two = np.flatnonzero(n == 2)
+            if len(two):
+                sa[two] += da[starts[two] + 1]
+                sb[two] += db[starts[two] + 1]
+            sa += 0.0
+            sb += 0.0
+            big = np.flatnonzero(n > 2)
+            if len(big):
+                da_l, db_l = da.tolist(), db.tolist()
+                fsum = math.fsum
+                try:
+                    for g, a, b in zip(big.tolist(), starts[big].tolist(), ends[big].tolist()):
+                        sa[g] = fsum(da_l[a:b])
+                        sb[g] = fsum(db_l[a:b])
+                except (OverflowError, ValueError):
+                    return None
+        if not (np.isfinite(sa).all() and np.isfinite(sb).all()):
+            return None
+        # ---- nothing has changed so far
+        for log, d_alpha, d_beta, c, t_max, i in zip(glogs, sa.tolist(), sb.tolist(), n.tolist(), t_last.tolist(), head):
+            entries = log.entries  # type: ignore[union-attr]
+            if entries:
+                bucket = entries[0]
+                bucket.d_alpha += d_alpha
+                bucket.d_beta += d_beta
+                bucket.n_folded += c
+                if t_max > bucket.t:
+                    bucket.t = t_max
+            else:
+                key = raws[i][0]
+                bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, compacted, key[0], key[1])
+                bucket.n_folded = c
+                log.entries = [bucket]  # type: ignore[union-attr]
+        eids = list(map(_rec_eid, raws))
+        gone = _last_seen_order(eids if order is None else map(eids.__getitem__, order.tolist()))
+        self._drop_folded_records(m)
+        self.n_compacted += m
+        if gone:
+            self._compacted_order.extend(gone)
+        return m
 
     @staticmethod
     def _retired_ids(
@@ -760,12 +868,7 @@ class ProvenanceStore:
         with records in a pair the pass skipped (``all_recs_seen`` false) is not retired."""
         if all_recs_seen and not entry_ids:
             # journal records only: each id is retired at its last record, in that order
-            seq = list(map(_rec_eid, chain.from_iterable([recs for _, recs in marks])))
-            last_first = dict.fromkeys(reversed(seq))
-            last_first.pop(None, None)  # type: ignore[call-overload]  # entries without an id are never remembered
-            order = list(last_first)
-            order.reverse()
-            return order
+            return _last_seen_order(map(_rec_eid, chain.from_iterable([recs for _, recs in marks])))
         remaining: Counter[str | None] = Counter(map(_rec_eid, raws))
         remaining.pop(None, None)
         gone: list[str] = []
