@@ -722,7 +722,7 @@ class ProvenanceStore:
                     n += len(recs)
                 d_alpha = fsum(das)
                 d_beta = fsum(dbs)
-            if bucket is None:
+            if bucket is None:  # (the numpy fold, _fold_journal, merges the same way)
                 bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, compacted, key[0], key[1])
                 bucket.n_folded = n
             else:
@@ -834,8 +834,9 @@ class ProvenanceStore:
                     return None
         if not (np.isfinite(sa).all() and np.isfinite(sb).all()):
             return None
-        # ---- nothing has changed so far
-        for log, d_alpha, d_beta, c, t_max, i in zip(glogs, sa.tolist(), sb.tolist(), n.tolist(), t_last.tolist(), head):
+        # ---- nothing has changed so far; the bucket merge below is the loop's (kept in step with it)
+        for log, d_alpha, d_beta, c, t_max, i in zip(glogs, sa.tolist(), sb.tolist(), n.tolist(),
+                                                     t_last.tolist(), head):
             entries = log.entries  # type: ignore[union-attr]
             if entries:
                 bucket = entries[0]
