@@ -60,16 +60,10 @@ class _Steps:
 
 
 def _floor_lists(g: Any) -> tuple[list[Any], ...]:
-    """The loaded graph's contents as flat lists (this benchmark's node schema), untimed."""
-    ids = list(g.nx._node)
-    attrs = list(g.nx._node.values())
-    bbox = [a["bbox"] for a in attrs]
-    cols = [[b[k][i] for b in bbox] for k in (0, 1) for i in range(3)]
-    scenes = [a["scene"] for a in attrs]
-    floor_z = [a["floor_z"] for a in attrs]
-    logs = list(g.provenance._pairs.values())
-    keys = [tuple(k) for k in g.provenance._pairs]
-    return ids, cols, scenes, floor_z, keys, [lg.alpha for lg in logs], [lg.beta for lg in logs]
+    """The loaded graph's contents as the flat lists ``_objects_floor`` builds from, untimed."""
+    ids, numbers, scenes, floor_z, pair_nodes, pair_preds, alpha, beta, *_ = _save_floor(g)
+    cols = [numbers[j::6] for j in range(6)]  # bbox lo x, y, z, hi x, y, z
+    return ids, cols, scenes, floor_z, list(zip(pair_nodes, pair_preds)), alpha, beta
 
 
 def _save_floor(g: Any) -> tuple[list[Any], ...]:
