@@ -50,8 +50,9 @@ def test_refits_are_amortised() -> None:
     assert s.n - s.n_fit <= max(cfg.min_refit, cfg.refit_growth * s.n_fit)
 
 
-def test_likelihood_ratio_is_eq2_and_always_finite_positive() -> None:
-    cal = MondrianCalibrator(CalibrationConfig(target_size=10))
+@pytest.mark.parametrize("reference", ["slice", "uniform"])
+def test_likelihood_ratio_is_eq2_and_always_finite_positive(reference: str) -> None:
+    cal = MondrianCalibrator(CalibrationConfig(target_size=10, lr_reference=reference))
     c, y = _data(400, seed=2)
     for ci, yi in zip(c, y):
         cal.add("k", "p", float(ci), int(yi))
@@ -62,7 +63,7 @@ def test_likelihood_ratio_is_eq2_and_always_finite_positive() -> None:
         assert math.isfinite(lam) and lam > 0 and kappa == 1.0
         eps = 0.5 / (s.n + 1)
         p = min(max(s.p_hat(probe), eps), 1 - eps)
-        pi = min(max(s.n_pos / s.n, eps), 1 - eps)
+        pi = min(max(s.n_pos / s.n, eps), 1 - eps) if reference == "slice" else 0.5  # Beta(1, 1): odds 1
         expected = (p / (1 - p)) * ((1 - pi) / pi)
         expected = min(max(expected, 1e-3), 1e3)
         assert lam == pytest.approx(expected, rel=1e-9)

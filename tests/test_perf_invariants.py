@@ -63,7 +63,7 @@ def test_revision_test_decision_equals_the_exact_kl(a: float, b: float, da: floa
     """The cheap KL estimate (lgamma + pure-Python digamma) never changes the revision decision."""
     from scipy.special import betaln, digamma
 
-    from sgbelief.fusion.operators.calibrated import _digamma_estimate, revision_kl_exceeds
+    from sgbelief.fusion.rules import _digamma_estimate, revision_kl_exceeds
 
     exact = betaln(a + da, b + db) - betaln(a, b) - da * digamma(a) - db * digamma(b) + (da + db) * digamma(a + b)
     assert revision_kl_exceeds(a, b, da, db, tau) == (exact > tau)
@@ -77,7 +77,7 @@ def test_kl_upper_bound_bounds_the_exact_kl(a: float, b: float, da: float, db: f
     (up to the exact formula's own rounding error)."""
     from scipy.special import betaln, digamma
 
-    from sgbelief.fusion.operators.calibrated import kl_upper_bound
+    from sgbelief.fusion.rules import kl_upper_bound
 
     exact = betaln(a + da, b + db) - betaln(a, b) - da * digamma(a) - db * digamma(b) + (da + db) * digamma(a + b)
     assert exact <= kl_upper_bound(a, b, da, db) + 1e-9 * (1.0 + a + b)
@@ -87,7 +87,7 @@ def test_kl_upper_bound_is_tight_for_small_steps() -> None:
     """For a small step the KL is ~ (1/2) delta^T H delta; the bound is within a few times it."""
     from scipy.special import betaln, digamma
 
-    from sgbelief.fusion.operators.calibrated import kl_upper_bound
+    from sgbelief.fusion.rules import kl_upper_bound
 
     a, b, da, db = 20.0, 30.0, 0.3, 0.1
     exact = betaln(a + da, b + db) - betaln(a, b) - da * digamma(a) - db * digamma(b) + (da + db) * digamma(a + b)

@@ -17,7 +17,9 @@ buffer is sliced per (kappa, phi) and pooled per phi and globally. For each slic
 - nonconformity scores (Eq. 1) for split and adaptive conformal sets (conformal.py).
 
 Shrinkage: log Lambda = l_s log L_slice + (1 - l_s) [l_p log L_phi + (1 - l_p) log L_global] with
-l = min(1, n / target_size) per level; kappa_hat(e) = clip(n_slice / target_size, kappa_min, 1).
+l = min(1, n / target_size) per level; kappa_hat(e) = clip(n_slice / target_size, kappa_min, 1)
+(``kappa_pooling: slice``, the paper) or clip(l_s + (1 - l_s) [l_p + (1 - l_p) l_g], kappa_min, 1)
+(``pooled``: the share of the shrunk estimate that rests on fitted data).
 Cold start (no outcome at any level): Lambda = c / (1 - c) ("raw", the model taken at its word,
 at the minimal weight kappa_min) or Lambda = 1 ("neutral").
 """
@@ -32,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from sgbelief.fusion.config import CalibrationConfig
+from sgbelief.fusion.rules import calibrated_log_lr
 from sgbelief.fusion.conformal import (
     _EPS,
     _ONE_MINUS_EPS,
@@ -503,7 +506,7 @@ class CalibrationSlice:
     def log_lr(self, c: float, reference: bool = True) -> float:
         """log Lambda_hat(c) of Eq. 2: log[p_hat / (1 - p_hat)] - log[pi / (1 - pi)], p_hat and pi
         clipped to [eps, 1 - eps]; ``reference=False`` keeps the calibrated posterior odds (base
-        rate not divided out: odds against the uniform Beta(1, 1) prior)."""
+        rate not divided out: odds against the uniform Beta(1, 1) prior); :func:`~sgbelief.fusion.rules.calibrated_log_lr`."""
         if self.stale:
             self.fit()
         kx, ky = self._kx, self._ky
@@ -515,13 +518,7 @@ class CalibrationSlice:
         else:
             x0, x1 = kx[i - 1], kx[i]
             p = ky[i] if x1 == x0 else ky[i - 1] + (ky[i] - ky[i - 1]) * (c - x0) / (x1 - x0)
-        eps = self.eps
-        if p < eps:
-            p = eps
-        elif p > 1.0 - eps:
-            p = 1.0 - eps
-        lo = _log(p / (1.0 - p))
-        return lo - self._log_prior_odds if reference else lo
+        return calibrated_log_lr(p, self.eps, self._log_prior_odds if reference else 0.0)
 
 
 #: stands for a level that does not exist yet (never fitted) in the query cache
@@ -694,7 +691,12 @@ class MondrianCalibrator:
             log_lr = m
         elif log_lr < -m:
             log_lr = -m
-        kappa = n_s / target
+        if cfg.kappa_pooling == "pooled":
+            ls = min(1.0, n_s / target)
+            lp = min(1.0, n_p / target)
+            kappa = ls + (1.0 - ls) * (lp + (1.0 - lp) * min(1.0, g.n_fit / target))
+        else:
+            kappa = n_s / target
         if kappa > 1.0:
             kappa = 1.0
         elif kappa < cfg.kappa_min:

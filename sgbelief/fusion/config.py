@@ -25,8 +25,20 @@ class CalibrationConfig(_Frozen):
     min_refit: int = Field(8, ge=1, description="... or by at least this many outcomes")
     cold_start: Literal["raw", "neutral"] = "raw"
     lr_reference: Literal["slice", "uniform"] = Field(
+        "uniform",
+        description="odds Lambda_hat is measured against: the uniform prior Beta(1, 1) (default, docs/method.md) "
+        "or the slice's base rate among claims (the paper's reading)",
+    )
+    kappa_pooling: Literal["slice", "pooled"] = Field(
         "slice",
-        description="odds Lambda_hat is measured against: the slice's base rate (Eq. 2) or the uniform prior Beta(1, 1)",
+        description="kappa_hat from the (context, predicate) slice's size alone (paper) or from the pooled "
+        "levels the shrunk estimate actually uses",
+    )
+    support_strata: int = Field(
+        4,
+        ge=1,
+        description="Mondrian strata by the number of earlier claims at (v, phi): 0, 1, ..., S-1 or more "
+        "(1: no stratification, the paper's taxonomy)",
     )
     adaptive_gamma: float = Field(0.005, ge=0.0, lt=1.0, description="adaptive conformal step size")
     buffer_size: int | None = Field(
@@ -80,6 +92,11 @@ class OperatorConfig(_Frozen):
     t_disagree: int = Field(10, ge=0, description="conflict-drop window of Q_bot")
     tau: float = Field(0.5, ge=0.0, lt=1.0, description="commit threshold")
     tau_t: float = Field(0.1, ge=0.0, lt=1.0, description="targeting-mass threshold")
+    geometric_evidence: Literal["none", "verdict"] = Field(
+        "verdict",
+        description="comod: a decisive geometric label also enters the belief as one observation of y "
+        "(verdict, default) or is used only to refuse and calibrate (none, the paper)",
+    )
     calibration: CalibrationConfig = CalibrationConfig()
     baselines: BaselinesConfig = BaselinesConfig()
 
@@ -124,6 +141,19 @@ class OperatorConfig(_Frozen):
             return cls.from_yaml(config_path("operators", "default.yaml"))
         except FileNotFoundError:
             return cls()
+
+
+#: the settings that make an operator config the paper's own (§4, Table 1): reported beside the default
+PAPER_SETTINGS: dict[str, Any] = {
+    "geometric_evidence": "none",
+    "calibration": {"lr_reference": "slice", "kappa_pooling": "slice", "support_strata": 1},
+}
+
+
+def paper_variant(config: OperatorConfig) -> OperatorConfig:
+    """``config`` with the method options of :data:`PAPER_SETTINGS` (everything else unchanged)."""
+    cal = config.calibration.model_copy(update=PAPER_SETTINGS["calibration"])
+    return config.model_copy(update={"geometric_evidence": PAPER_SETTINGS["geometric_evidence"], "calibration": cal})
 
 
 def resolve_config(config: OperatorConfig | dict[str, Any] | str | Path | None) -> OperatorConfig:

@@ -13,6 +13,8 @@ from sgbelief.fusion.operators import (
     MajorityVoteOperator,
     NaiveBayesOperator,
     OverwriteOperator,
+    PaperCalibratedOperator,
+    PaperCoModulatedOperator,
     RefinedOperator,
 )
 from sgbelief.fusion.protocol import FusionOperator
@@ -27,6 +29,10 @@ OPERATORS: dict[str, type] = {
 }
 #: names in the paper's table order
 OPERATOR_NAMES: tuple[str, ...] = tuple(OPERATORS)
+#: the method's operators with the paper's own settings, reported beside the defaults
+PAPER_OPERATOR_NAMES: tuple[str, ...] = ("cal_paper", "comod_paper")
+OPERATORS["cal_paper"] = PaperCalibratedOperator
+OPERATORS["comod_paper"] = PaperCoModulatedOperator
 
 
 def register_operator(name: str, cls: type) -> None:

@@ -9,7 +9,12 @@ from sgbelief.fusion.operators.baselines import (
     OverwriteOperator,
     RefinedOperator,
 )
-from sgbelief.fusion.operators.calibrated import CalibratedOperator, CoModulatedOperator
+from sgbelief.fusion.operators.calibrated import (
+    CalibratedOperator,
+    CoModulatedOperator,
+    PaperCalibratedOperator,
+    PaperCoModulatedOperator,
+)
 
 __all__ = [
     "BaseOperator",
@@ -19,4 +24,6 @@ __all__ = [
     "RefinedOperator",
     "CalibratedOperator",
     "CoModulatedOperator",
+    "PaperCalibratedOperator",
+    "PaperCoModulatedOperator",
 ]

@@ -1,92 +1,47 @@
-"""U_cal and U_comod: the calibrated commit gate and the co-modulated operator (Alg. 1, Eq. 2-5)."""
+"""U_cal and U_comod: the calibrated commit gate and the co-modulated operator (Alg. 1, Eq. 2-5).
+
+:meth:`CalibratedOperator._apply_reference` is Algorithm 1 written as its named steps over the
+pure functions of :mod:`sgbelief.fusion.rules`; it is the reference. ``engine="fast"`` (the
+default) runs the same algorithm fused into one loop (private: ``_calibrated_fast``), proven
+identical by ``tests/test_engines.py``. The method options and their derivations are in
+``docs/method.md``; ``cal_paper`` / ``comod_paper`` are the paper's own settings.
+"""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any
-
-from scipy import special as _sp
+from typing import TYPE_CHECKING, Any, Literal
 
 from sgbelief.fusion import queues
 from sgbelief.fusion.calibration import MondrianCalibrator
-from sgbelief.errors import UnknownPredicateError
-from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
-from sgbelief.fusion.config import OperatorConfig
+from sgbelief.fusion.config import OperatorConfig, paper_variant, resolve_config
 from sgbelief.fusion.conformal import ConformalSlice, PredictionSet, no_coverage, prediction_set
+from sgbelief.fusion.operators import _calibrated_fast
 from sgbelief.fusion.operators.base import BaseOperator
 from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
+from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_exceeds: re-exported)
+    claim_increments,
+    evidence_weight,
+    kl_upper_bound,
+    revision_kl_exceeds,
+    stance_of,
+    stratified_context,
+    support_stratum,
+    verdict,
+    verification_increments,
+)
 from sgbelief.graph.provenance import EntryStatus
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
     from sgbelief.fusion.events import EvidenceEvent
+    from sgbelief.graph.provenance import ProvenanceStore
     from sgbelief.graph.scene_graph import SceneGraph
 
-_betaln = _sp.betaln
-_digamma = _sp.digamma
-_COMMITTED = EntryStatus.COMMITTED
-_QUARANTINED = EntryStatus.QUARANTINED
-_REFUSED = EntryStatus.REFUSED
-_NO_CLAIM = Verdict.NO_CLAIM
-_CORR = Verdict.CORROBORATES
+ENGINES = ("fast", "reference")
 _CONTRA = Verdict.CONTRADICTS
-_BELOW = Action.BELOW_THRESHOLD
-_A_COMMITTED = Action.COMMITTED
-_A_QUARANTINED = Action.QUARANTINED
-_A_REFUSED = Action.REFUSED
-_lgamma = math.lgamma
-
-
-def _digamma_estimate(x: float) -> float:
-    """psi(x) for x > 0 in pure Python (absolute error < 1e-10): recurrence up to x >= 6, then
-    the asymptotic series. A scalar call of ``scipy.special.digamma`` costs several times more."""
-    r = 0.0
-    while x < 6.0:
-        r -= 1.0 / x
-        x += 1.0
-    f = 1.0 / (x * x)
-    return r + math.log(x) - 0.5 / x - f * (1 / 12 - f * (1 / 120 - f * (1 / 252 - f * (1 / 240 - f / 132))))
-
-
-def kl_upper_bound(a: float, b: float, da: float, db: float) -> float:
-    """An upper bound on KL(Beta(a, b) || Beta(a + da, b + db)) for da, db >= 0 (§4.3 revision test).
-
-    The KL between members of an exponential family is the Bregman divergence of its log-partition
-    A(a, b) = ln B(a, b), so with delta = (da, db) and the Hessian H of A,
-    KL = int_0^1 (1 - s) delta^T H((a, b) + s delta) delta ds, and
-    delta^T H delta = da^2 psi'(a) + db^2 psi'(b) - (da + db)^2 psi'(a + b) <= da^2 psi'(a) + db^2 psi'(b).
-    psi' decreases, so along the path (arguments >= a, b) it is at most its value at (a, b), and
-    psi'(x) = sum_k 1 / (x + k)^2 < 1 / x^2 + 1 / x. Hence
-    KL <= (da^2 (1/a + 1/a^2) + db^2 (1/b + 1/b^2)) / 2.
-    """
-    ia = 1.0 / a
-    ib = 1.0 / b
-    return 0.5 * (da * da * ia * (1.0 + ia) + db * db * ib * (1.0 + ib))
-
-
-def revision_kl_exceeds(a: float, b: float, da: float, db: float, tau_rev: float) -> bool:
-    """True when KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev (the revision test of §4.3).
-
-    KL = ln B(a', b') - ln B(a, b) - da psi(a) - db psi(b) + (da + db) psi(a + b).
-    It is first estimated with ``math.lgamma`` and a pure-Python digamma (several times cheaper
-    than ``scipy.special``); only when the estimate is within a safe margin of ``tau_rev`` (far
-    above the estimate's error, which scales with (a + b) log(a + b) for lgamma and with da + db
-    for digamma) is the KL recomputed with ``betaln`` / ``digamma``, so the decision is always
-    the one the exact formula gives. Before either, the bound of :func:`kl_upper_bound` settles
-    most calls (non-negative increments on a belief that already holds some evidence).
-    """
-    a2, b2 = a + da, b + db
-    margin = 1e-8 * (1.0 + a2 + b2 + da + db)
-    if da >= 0.0 and db >= 0.0 and kl_upper_bound(a, b, da, db) < tau_rev - 2.0 * margin:
-        return False
-    dig = (da + db) * _digamma_estimate(a + b) - da * _digamma_estimate(a) - db * _digamma_estimate(b)
-    est = (_lgamma(a2) + _lgamma(b2) - _lgamma(a2 + b2)) - (_lgamma(a) + _lgamma(b) - _lgamma(a + b)) + dig
-    if abs(est - tau_rev) > margin:
-        return est > tau_rev
-    exact = _betaln(a2, b2) - _betaln(a, b) - da * _digamma(a) - db * _digamma(b) + (da + db) * _digamma(a + b)
-    return exact > tau_rev
+_CORR = Verdict.CORROBORATES
 
 
 class CalibratedOperator(BaseOperator):
@@ -94,34 +49,62 @@ class CalibratedOperator(BaseOperator):
 
     For each targeted v with T(v) > tau_T (Alg. 1):
 
-    1. Lambda_hat, kappa_hat from the Mondrian isotonic calibrator of (kappa, phi) (Eq. 2);
-    2. candidate increments (Eq. 4) with w = w0 kappa_hat T(v)::
+    1. the claim's support stratum (earlier claims at (v, phi)) refines its Mondrian cell;
+    2. Lambda_hat, kappa_hat from the Mondrian isotonic calibrator of that cell (Eq. 2);
+    3. candidate increments (Eq. 4) with w = w0 kappa_hat T(v)::
 
            d_alpha = w Lambda / (1 + Lambda),   d_beta = w / (1 + Lambda)
 
-    3. the event first acts on the revisions pending at (v, phi) (corroborate / disconfirm),
+    4. the event first acts on the revisions pending at (v, phi) (corroborate / disconfirm),
        then the revision test: commit when KL(B || B') <= tau_rev, else quarantine in Q;
-    4. after all targets, every decisive geometric label (y = 1 positive set, y = 0 negative
+    5. after all targets, every decisive geometric label (y = 1 positive set, y = 0 negative
        set) is appended to the calibration buffer (so an event never calibrates itself).
 
     U_cal consults the geometric channel only for calibration, never to refuse a claim.
+    ``engine``: ``"fast"`` (fused loop, default) or ``"reference"`` (the named steps); same results.
     """
 
     name = "cal"
+    #: refuse claims the geometric channel contradicts (Property 2): comod
     check_compatibility = False
 
     def __init__(
         self,
         config: OperatorConfig | dict[str, Any] | str | None = None,
         vocabulary: SubsumptionTable | None = None,
+        *,
+        engine: Literal["fast", "reference"] = "fast",
     ) -> None:
-        super().__init__(config, vocabulary)
+        super().__init__(self._settings(resolve_config(config)), vocabulary)
+        if engine not in ENGINES:
+            raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        self.engine = engine
         cfg = self.config
         import sklearn.isotonic  # noqa: F401  (pay the import here, not inside the first timed update)
 
         self.calibrator_ = MondrianCalibrator(cfg.calibration, alpha=cfg.alpha)
         #: pair-level conformal scores s(p_v, y) per predicate (Property 1 on beliefs)
         self.pair_conformal_: dict[str, ConformalSlice] = {}
+        #: claims applied so far per (v, phi), per provenance store (the support of the next claim)
+        self._claims: dict[int, tuple[ProvenanceStore, dict[tuple[Any, str], int]]] = {}
+
+    @classmethod
+    def _settings(cls, config: OperatorConfig) -> OperatorConfig:
+        """The config the operator runs with (the paper variants override the method options)."""
+        return config
+
+    @property
+    def observes_geometry(self) -> bool:
+        """A decisive geometric label also enters the belief (comod with ``geometric_evidence: verdict``)."""
+        return self.check_compatibility and self.config.geometric_evidence == "verdict"
+
+    @property
+    def claims_property2(self) -> bool:
+        """Property 2 holds exactly: no ⊥ event changes the belief at its (v, phi). True for a
+        refusing operator that does not also observe the geometric label (``comod_paper``,
+        ``geometric_evidence: none``); with ``verdict`` a refused claim's own increments still
+        never enter, but the label's observation (against the claim) does."""
+        return self.check_compatibility and not self.observes_geometry
 
     # ------------------------------------------------------------- time
     def _timeouts(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
@@ -172,141 +155,132 @@ class CalibratedOperator(BaseOperator):
         items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]],
         reports: list[UpdateReport] | None,
     ) -> list[QueueResolution]:
-        """Alg. 1 for each (event, channel) in order; appends one report per event to ``reports``
-        (with per-target outcomes) unless it is None. Returns every event's queue resolutions."""
-        report = reports is not None
-        vocab = graph.vocabulary
-        cfg = self.config
-        tau_t, tau_rev, w0 = cfg.tau_t, cfg.tau_rev, cfg.w0
-        prov = graph.provenance
-        record = prov.record
-        commit = prov.commit
-        pairs_get = prov._pairs.get
-        pending_map = prov._pending_by_pair  # pairs with entries waiting in Q or Q_bot
-        prior_a, prior_b = prov.prior_alpha, prov.prior_beta
-        gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
-        tables = self.vocabulary.outcome_tables() if self.vocabulary is not None else None
-        comod = self.check_compatibility
-        min_refit, refit_growth = cfg.calibration.min_refit, cfg.calibration.refit_growth
-        calibrator = self.calibrator_
-        tick = self.tick
+        if self.engine == "fast":
+            return _calibrated_fast.apply_fused(self, graph, items, reports)
+        return self._apply_reference(graph, items, reports)
+
+    def _apply_reference(
+        self,
+        graph: SceneGraph,
+        items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]],
+        reports: list[UpdateReport] | None,
+    ) -> list[QueueResolution]:
+        """Algorithm 1, step by step, for each (event, channel) in order (the reference path)."""
         out: list[QueueResolution] = []
-        n_events = n_targets = n_below = n_committed = n_quarantined = n_refused = 0
-        try:
-            for event, channel in items:
-                pred, c, ctx, eid, t = event.predicate, event.confidence, event.context, event.id, event.t
-                if vocab is not None and pred not in vocab:
-                    raise UnknownPredicateError(pred, vocab)
-                resolutions = tick(graph, t) if t > graph.clock else []
-                # committed entries go to the store's journal (materialised on demand, folded by
-                # compaction without objects) unless the timeline is live: then the next refusal or
-                # quarantine would materialise the journal anyway, and recording directly is cheaper
-                direct = bool(prov._timeline)
-                outcome_of = tables.get(pred) if tables is not None else None
-                label_of = None
-                if channel is not None and outcome_of is not None:
-                    label_of = channel.labels.get if type(channel) is FrameLabels else channel.label
-                frame = label_of is not None and type(channel) is FrameLabels
-                claim_pos = c >= 0.5
-                e_targets = e_below = e_committed = e_quarantined = e_refused = 0
-                lam = kappa = -1.0
-                new_outcomes: list[int] = []
-                outcomes: list[TargetOutcome] = []
-                pair_slice: ConformalSlice | None = None  # this predicate's pair-level scores, fetched once
-                for node, mass in event.targets.items():
-                    e_targets += 1
-                    if mass <= tau_t and not report:
-                        e_below += 1
-                        continue
-                    if label_of is None:
-                        y = None
-                    else:
-                        label = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
-                        y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
-                    if y is None:
-                        verdict = _NO_CLAIM
-                    else:
-                        verdict = _CORR if (y == 1) == claim_pos else _CONTRA
-                    if mass <= tau_t:
-                        e_below += 1
-                        outcomes.append(TargetOutcome(node, mass, verdict, _BELOW))
-                        continue
-                    if node not in gnx:
-                        graph.ensure_node(node)
-                    key = (node, pred)
-                    log = pairs_get(key)
-                    if log is None:
-                        a, b = prior_a, prior_b
-                    else:
-                        a, b = log.alpha, log.beta
-                    if y is not None:
-                        new_outcomes.append(y)
-                        if pair_slice is None:
-                            pair_slice = self._pair_slice(pred)
-                        pair_slice.add_outcome(a / (a + b), y, min_refit, refit_growth)
-                    if lam < 0.0:
-                        lam, kappa = calibrator.likelihood_ratio(c, ctx, pred)
-                    w = w0 * kappa * mass
-                    da = w * lam / (1.0 + lam)
-                    db = w / (1.0 + lam)
-                    if comod and verdict is _CONTRA:
-                        # Property 2: refused and logged, never committed; geometry's stance opposes the claim
-                        stance = -1 if claim_pos else 1
-                        had_pending = key in pending_map
-                        record(node, pred, eid, t, da, db, _REFUSED, stance)
-                        if had_pending:  # otherwise the only pending entry is this refused one
-                            resolutions += queues.quarantine_feedback(prov, node, pred, stance, eid, t)
-                        e_refused += 1
-                        if report:
-                            outcomes.append(TargetOutcome(node, mass, verdict, _A_REFUSED, 0.0, 0.0))
-                        continue
-                    stance = 1 if lam > 1.0 else -1 if lam < 1.0 else 0
-                    if key in pending_map:
-                        fb = queues.quarantine_feedback(prov, node, pred, stance, eid, t)
-                        if fb:
-                            resolutions += fb
-                            a, b = prov.alpha_beta(node, pred)
-                    # revision test: KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev (§4.3); the bound
-                    # settles it without special functions when it is far below tau_rev
-                    if kl_upper_bound(a, b, da, db) < tau_rev - 2e-8 * (1.0 + a + b + 2.0 * (da + db)):
-                        exceeds = False
-                    else:
-                        exceeds = revision_kl_exceeds(a, b, da, db, tau_rev)
-                    if exceeds:
-                        record(node, pred, eid, t, da, db, _QUARANTINED, stance)
-                        e_quarantined += 1
-                        if report:
-                            outcomes.append(TargetOutcome(node, mass, verdict, _A_QUARANTINED, 0.0, 0.0))
-                    else:
-                        if direct:
-                            record(node, pred, eid, t, da, db, _COMMITTED, stance)
-                        else:
-                            commit(node, pred, eid, t, da, db, stance)
-                        e_committed += 1
-                        if report:
-                            outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))
-                    if comod and verdict is _CORR and key in pending_map:
-                        resolutions += queues.resolve_disagreements(prov, node, pred, t)
-                n_events += 1
-                n_targets += e_targets
-                n_below += e_below
-                n_committed += e_committed
-                n_quarantined += e_quarantined
-                n_refused += e_refused
-                if new_outcomes:
-                    add = calibrator.add
-                    for y in new_outcomes:
-                        add(ctx, pred, c, y)
-                if resolutions:
-                    self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
-                    out += resolutions
-                if report:
-                    reports.append(make_report((eid, t, pred, tuple(outcomes), tuple(resolutions))))  # type: ignore[union-attr]
-        finally:
-            if n_events:
-                self._add_totals(n_events, n_targets, n_below, n_committed, n_quarantined, n_refused)
+        for event, channel in items:
+            self._check(graph, event)
+            resolutions = self.tick(graph, event.t) if event.t > graph.clock else []
+            outcomes: list[TargetOutcome] = []
+            verified: list[tuple[int, str]] = []  # (y, calibration context) for step 5
+            counts = [0, 0, 0, 0, 0]  # targets, below tau_T, committed, quarantined, refused
+            for node, mass in event.targets.items():
+                counts[0] += 1
+                y = self._geometric_outcome(channel, node, event)
+                v = verdict(y, event.confidence)
+                if mass <= self.config.tau_t:
+                    counts[1] += 1
+                    outcomes.append(TargetOutcome(node, mass, v, Action.BELOW_THRESHOLD))
+                    continue
+                graph.ensure_node(node)
+                action, da, db, res = self._apply_target(graph, event, node, mass, y, v, verified)
+                resolutions += res
+                counts[{Action.COMMITTED: 2, Action.QUARANTINED: 3, Action.REFUSED: 4}[action]] += 1
+                outcomes.append(TargetOutcome(node, mass, v, action, da, db))
+            self._add_totals(1, *counts)
+            self._feed_calibration(event, verified)
+            if resolutions:
+                self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
+                out += resolutions
+            if reports is not None:
+                reports.append(make_report((event.id, event.t, event.predicate, tuple(outcomes), tuple(resolutions))))
         return out
 
+    def _apply_target(
+        self, graph: SceneGraph, event: EvidenceEvent, node: Any, mass: float, y: int | None, v: Verdict,
+        verified: list[tuple[int, str]],
+    ) -> tuple[Action, float, float, list[QueueResolution]]:
+        """Alg. 1 lines 4-19 for one target with T(v) > tau_T: (action, d_alpha, d_beta, resolutions)."""
+        cfg, prov, pred = self.config, graph.provenance, event.predicate
+        stratum = support_stratum(self._next_claim(prov, node, pred), cfg.calibration.support_strata)
+        context = stratified_context(event.context, stratum, cfg.calibration.support_strata)
+        a, b = prov.alpha_beta(node, pred)
+        resolutions: list[QueueResolution] = []
+        if y is not None:
+            verified.append((y, context))
+            self._pair_slice(pred).add_outcome(a / (a + b), y, cfg.calibration.min_refit, cfg.calibration.refit_growth)
+            if self.observes_geometry:
+                ga, gb = verification_increments(y, cfg.w0 * mass)
+                prov.record(node, pred, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1 if y == 1 else -1)
+                a, b = a + ga, b + gb
+        lam, kappa = self.calibrator_.likelihood_ratio(event.confidence, context, pred)  # Eq. 2
+        da, db = claim_increments(lam, evidence_weight(cfg.w0, kappa, mass))  # Eq. 4
+        if self.check_compatibility and v is _CONTRA:  # refusal (Property 2)
+            stance = -1 if event.confidence >= 0.5 else 1  # geometry's stance opposes the claim
+            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.REFUSED, stance)
+            resolutions += queues.quarantine_feedback(prov, node, pred, stance, event.id, event.t)
+            return Action.REFUSED, 0.0, 0.0, resolutions
+        stance = stance_of(lam)
+        fb = queues.quarantine_feedback(prov, node, pred, stance, event.id, event.t)
+        if fb:
+            resolutions += fb
+            a, b = prov.alpha_beta(node, pred)
+        if revision_kl_exceeds(a, b, da, db, cfg.tau_rev):  # revision: quarantine in Q
+            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.QUARANTINED, stance)
+            action, da, db = Action.QUARANTINED, 0.0, 0.0
+        else:
+            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.COMMITTED, stance)
+            action = Action.COMMITTED
+        if self.check_compatibility and v is _CORR:  # later agreement resolves pending ⊥ at (v, phi)
+            resolutions += queues.resolve_disagreements(prov, node, pred, event.t)
+        return action, da, db, resolutions
+
+    def _geometric_outcome(self, channel: GeometricChannel | None, node: Any, event: EvidenceEvent) -> int | None:
+        """y of the geometric label at (v, t) for the claimed predicate (1, 0, or None: ∅)."""
+        if channel is None or self.vocabulary is None:
+            return None
+        table = self.vocabulary.outcome_tables().get(event.predicate)
+        if table is None:
+            return None
+        label = channel.label(node, event.t)
+        return table.get(label) if label is not None else None
+
+    def _feed_calibration(self, event: EvidenceEvent, verified: list[tuple[int, str]]) -> None:
+        """Alg. 1 line 21: the event's verification outcomes join the buffer after all its targets."""
+        for y, context in verified:
+            self.calibrator_.add(context, event.predicate, event.confidence, y)
+
+    # ---------------------------------------------------------- support
+    def _claims_of(self, prov: ProvenanceStore) -> dict[tuple[Any, str], int]:
+        """The claim counts of one provenance store (created on first use)."""
+        held = self._claims.get(id(prov))
+        if held is None or held[0] is not prov:
+            held = self._claims[id(prov)] = (prov, {})
+        return held[1]
+
+    def _claims_in_log(self, prov: ProvenanceStore, node: Any, predicate: str) -> int:
+        """Claims a pair's log already holds (a graph loaded from disk): its distinct event ids,
+        a compacted entry counting the entries it folded."""
+        n = 0
+        ids = set()
+        for entry in prov.entries(node, predicate):
+            if entry.status is EntryStatus.COMPACTED:
+                n += entry.n_folded
+            elif entry.event_id not in ids:
+                ids.add(entry.event_id)
+                n += 1
+        return n
+
+    def _next_claim(self, prov: ProvenanceStore, node: Any, predicate: str) -> int:
+        """Earlier claims at (v, phi), counting this one for the next."""
+        claims = self._claims_of(prov)
+        key = (node, predicate)
+        n = claims.get(key)
+        if n is None:
+            n = self._claims_in_log(prov, node, predicate) if key in prov else 0
+        claims[key] = n + 1
+        return n
+
+    # ---------------------------------------------------------- reading
     def _pair_slice(self, predicate: str) -> ConformalSlice:
         """The pair-level conformal scores of a predicate (created on first use)."""
         sl = self.pair_conformal_.get(predicate)
@@ -314,12 +288,6 @@ class CalibratedOperator(BaseOperator):
             sl = self.pair_conformal_[predicate] = ConformalSlice(self.config.alpha, self.config.calibration.buffer_size)
         return sl
 
-    def _pair_score(self, predicate: str, p: float, y: int) -> None:
-        """Record s(p_v, y) (Eq. 1 on the belief mean) for the pair-level sets of Property 1."""
-        cfg = self.config.calibration
-        self._pair_slice(predicate).add_outcome(p, y, cfg.min_refit, cfg.refit_growth)
-
-    # ---------------------------------------------------------- reading
     def prediction_set(self, graph: SceneGraph, node: Any, predicate: str) -> PredictionSet:
         """(1 - alpha) prediction set over {0, 1} for y*_{v, phi} (Property 1), or "no coverage claim".
 
@@ -342,13 +310,22 @@ class CalibratedOperator(BaseOperator):
         return self.calibrator_.prediction_set(event.confidence, event.context, event.predicate, adaptive=adaptive)
 
     def likelihood_ratio(self, event: EvidenceEvent) -> tuple[float, float]:
-        """(Lambda_hat, kappa_hat) the operator would use for this event now."""
-        return self.calibrator_.likelihood_ratio(event.confidence, event.context, event.predicate)
+        """(Lambda_hat, kappa_hat) the operator would use for this event now (first-claim stratum
+        when claims are stratified by support)."""
+        n = self.config.calibration.support_strata
+        return self.calibrator_.likelihood_ratio(event.confidence, stratified_context(event.context, 0, n), event.predicate)
 
     def freeze_calibration(self) -> None:
         """Stop learning from new outcomes (e.g. to replay with a fixed calibration)."""
         self.calibrator_.refit_all()
         self.calibrator_.frozen = True
+
+    def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
+        """Retract an event exactly (cascading within T_cor); the retracted claims no longer count
+        toward their pairs' support."""
+        retracted = super().retract(graph, event_id)
+        self._claims.pop(id(graph.provenance), None)  # recounted from the logs on next use
+        return retracted
 
 
 class CoModulatedOperator(CalibratedOperator):
@@ -356,11 +333,32 @@ class CoModulatedOperator(CalibratedOperator):
 
     A claim the geometric channel contradicts at (v, t) (verdict ⊥, sign-flipped for c < 0.5)
     is refused: logged with status ``refused`` in the disagreement queue Q⊥ and never committed
-    (Property 2). A later T at the same (v, phi) within T_disagree resolves it without
+    (Property 2). A later ⊤ at the same (v, phi) within T_disagree resolves it without
     committing it; otherwise it expires after T_disagree; an explicit confirmation may override.
+    With ``geometric_evidence: verdict`` (the default) the decisive geometric label itself is one
+    observation of y at (v, phi), committed under the claim's event id (docs/method.md).
     """
 
     name = "comod"
     check_compatibility = True
 
 
+class PaperCalibratedOperator(CalibratedOperator):
+    """``cal_paper``: U_cal with the paper's own settings (:data:`~sgbelief.fusion.config.PAPER_SETTINGS`)."""
+
+    name = "cal_paper"
+
+    @classmethod
+    def _settings(cls, config: OperatorConfig) -> OperatorConfig:
+        return paper_variant(config)
+
+
+class PaperCoModulatedOperator(CoModulatedOperator):
+    """``comod_paper``: U_comod with the paper's own settings (refusal only, slice-referenced
+    Lambda_hat, no support strata)."""
+
+    name = "comod_paper"
+
+    @classmethod
+    def _settings(cls, config: OperatorConfig) -> OperatorConfig:
+        return paper_variant(config)

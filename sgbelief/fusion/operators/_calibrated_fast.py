@@ -1,0 +1,203 @@
+"""Private: Algorithm 1 for ``cal`` / ``comod`` fused into one loop (the ``engine="fast"`` path).
+
+This is :meth:`CalibratedOperator._apply_reference` with the step functions of
+:mod:`sgbelief.fusion.rules` inlined and the per-event set-up hoisted, and with committed entries
+sent to the provenance store's journal. It may read private state of the store and the graph.
+Its results (map, provenance, queues, stats, calibration state) equal the reference path's:
+``tests/test_engines.py`` checks that by hypothesis (``sgbelief.testing.check_fast_matches_reference``).
+Measurements behind its shape are in docs/performance.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
+from sgbelief.errors import UnknownPredicateError
+from sgbelief.fusion import queues
+from sgbelief.fusion.channel import FrameLabels
+from sgbelief.fusion.compatibility import Verdict
+from sgbelief.fusion.conformal import ConformalSlice
+from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
+from sgbelief.fusion.rules import kl_upper_bound, revision_kl_exceeds
+from sgbelief.graph.provenance import EntryStatus
+
+if TYPE_CHECKING:  # pragma: no cover
+    from sgbelief.fusion.channel import GeometricChannel
+    from sgbelief.fusion.events import EvidenceEvent
+    from sgbelief.fusion.operators.calibrated import CalibratedOperator
+    from sgbelief.graph.scene_graph import SceneGraph
+
+_COMMITTED = EntryStatus.COMMITTED
+_QUARANTINED = EntryStatus.QUARANTINED
+_REFUSED = EntryStatus.REFUSED
+_NO_CLAIM = Verdict.NO_CLAIM
+_CORR = Verdict.CORROBORATES
+_CONTRA = Verdict.CONTRADICTS
+_BELOW = Action.BELOW_THRESHOLD
+_A_COMMITTED = Action.COMMITTED
+_A_QUARANTINED = Action.QUARANTINED
+_A_REFUSED = Action.REFUSED
+
+
+def apply_fused(
+    op: CalibratedOperator,
+    graph: SceneGraph,
+    items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]],
+    reports: list[UpdateReport] | None,
+) -> list[QueueResolution]:
+    """Alg. 1 for each (event, channel) in order; appends one report per event to ``reports``
+    (with per-target outcomes) unless it is None. Returns every event's queue resolutions."""
+    report = reports is not None
+    vocab = graph.vocabulary
+    cfg = op.config
+    tau_t, tau_rev, w0 = cfg.tau_t, cfg.tau_rev, cfg.w0
+    prov = graph.provenance
+    record = prov.record
+    commit = prov.commit
+    pairs_get = prov._pairs.get
+    pending_map = prov._pending_by_pair  # pairs with entries waiting in Q or Q_bot
+    prior_a, prior_b = prov.prior_alpha, prov.prior_beta
+    gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
+    tables = op.vocabulary.outcome_tables() if op.vocabulary is not None else None
+    comod = op.check_compatibility
+    geo = op.observes_geometry
+    n_strata = cfg.calibration.support_strata
+    top = n_strata - 1
+    claims = op._claims_of(prov)
+    claims_get = claims.get
+    min_refit, refit_growth = cfg.calibration.min_refit, cfg.calibration.refit_growth
+    calibrator = op.calibrator_
+    tick = op.tick
+    out: list[QueueResolution] = []
+    n_events = n_targets = n_below = n_committed = n_quarantined = n_refused = 0
+    try:
+        for event, channel in items:
+            pred, c, ctx, eid, t = event.predicate, event.confidence, event.context, event.id, event.t
+            if vocab is not None and pred not in vocab:
+                raise UnknownPredicateError(pred, vocab)
+            resolutions = tick(graph, t) if t > graph.clock else []
+            outcome_of = tables.get(pred) if tables is not None else None
+            label_of = None
+            if channel is not None and outcome_of is not None:
+                label_of = channel.labels.get if type(channel) is FrameLabels else channel.label
+            frame = label_of is not None and type(channel) is FrameLabels
+            claim_pos = c >= 0.5
+            e_targets = e_below = e_committed = e_quarantined = e_refused = 0
+            lam = kappa = -1.0
+            lam_ctx = None
+            new_outcomes: list[tuple[int, str]] = []
+            outcomes: list[TargetOutcome] = []
+            pair_slice: ConformalSlice | None = None  # this predicate's pair-level scores, fetched once
+            for node, mass in event.targets.items():
+                e_targets += 1
+                if mass <= tau_t and not report:
+                    e_below += 1
+                    continue
+                if label_of is None:
+                    y = None
+                else:
+                    label = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
+                    y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
+                if y is None:
+                    verdict = _NO_CLAIM
+                else:
+                    verdict = _CORR if (y == 1) == claim_pos else _CONTRA
+                if mass <= tau_t:
+                    e_below += 1
+                    outcomes.append(TargetOutcome(node, mass, verdict, _BELOW))
+                    continue
+                if node not in gnx:
+                    graph.ensure_node(node)
+                key = (node, pred)
+                log = pairs_get(key)
+                if log is None:
+                    a, b = prior_a, prior_b
+                else:
+                    a, b = log.alpha, log.beta
+                if n_strata > 1:
+                    n_prev = claims_get(key)
+                    if n_prev is None:
+                        n_prev = 0 if log is None else op._claims_in_log(prov, node, pred)
+                    claims[key] = n_prev + 1
+                    sctx = f"{ctx}|s{n_prev if n_prev < top else top}"
+                else:
+                    sctx = ctx
+                if y is not None:
+                    new_outcomes.append((y, sctx))
+                    if pair_slice is None:
+                        pair_slice = op._pair_slice(pred)
+                    pair_slice.add_outcome(a / (a + b), y, min_refit, refit_growth)
+                    if geo:  # the decisive label as one observation of y (rules.verification_increments)
+                        gw = w0 * mass
+                        ga, gb = (gw, 0.0) if y == 1 else (0.0, gw)
+                        if prov._timeline:
+                            record(node, pred, eid, t, ga, gb, _COMMITTED, 1 if y == 1 else -1)
+                        else:
+                            commit(node, pred, eid, t, ga, gb, 1 if y == 1 else -1)
+                        a += ga
+                        b += gb
+                if sctx != lam_ctx:
+                    lam, kappa = calibrator.likelihood_ratio(c, sctx, pred)
+                    lam_ctx = sctx
+                w = w0 * kappa * mass
+                da = w * lam / (1.0 + lam)
+                db = w / (1.0 + lam)
+                if comod and verdict is _CONTRA:
+                    # Property 2: refused and logged, never committed; geometry's stance opposes the claim
+                    stance = -1 if claim_pos else 1
+                    had_pending = key in pending_map
+                    record(node, pred, eid, t, da, db, _REFUSED, stance)
+                    if had_pending:  # otherwise the only pending entry is this refused one
+                        resolutions += queues.quarantine_feedback(prov, node, pred, stance, eid, t)
+                    e_refused += 1
+                    if report:
+                        outcomes.append(TargetOutcome(node, mass, verdict, _A_REFUSED, 0.0, 0.0))
+                    continue
+                stance = 1 if lam > 1.0 else -1 if lam < 1.0 else 0
+                if key in pending_map:
+                    fb = queues.quarantine_feedback(prov, node, pred, stance, eid, t)
+                    if fb:
+                        resolutions += fb
+                        a, b = prov.alpha_beta(node, pred)
+                # the bound settles the revision test without special functions when far below tau_rev
+                if kl_upper_bound(a, b, da, db) < tau_rev - 2e-8 * (1.0 + a + b + 2.0 * (da + db)):
+                    exceeds = False
+                else:
+                    exceeds = revision_kl_exceeds(a, b, da, db, tau_rev)
+                if exceeds:
+                    record(node, pred, eid, t, da, db, _QUARANTINED, stance)
+                    e_quarantined += 1
+                    if report:
+                        outcomes.append(TargetOutcome(node, mass, verdict, _A_QUARANTINED, 0.0, 0.0))
+                else:
+                    # committed entries go to the journal unless the timeline is live: then the next
+                    # refusal or quarantine would materialise the journal anyway
+                    if prov._timeline:
+                        record(node, pred, eid, t, da, db, _COMMITTED, stance)
+                    else:
+                        commit(node, pred, eid, t, da, db, stance)
+                    e_committed += 1
+                    if report:
+                        outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))
+                if comod and verdict is _CORR and key in pending_map:
+                    resolutions += queues.resolve_disagreements(prov, node, pred, t)
+            n_events += 1
+            n_targets += e_targets
+            n_below += e_below
+            n_committed += e_committed
+            n_quarantined += e_quarantined
+            n_refused += e_refused
+            if new_outcomes:
+                add = calibrator.add
+                for y, sctx in new_outcomes:
+                    add(sctx, pred, c, y)
+            if resolutions:
+                op._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
+                out += resolutions
+            if report:
+                reports.append(make_report((eid, t, pred, tuple(outcomes), tuple(resolutions))))  # type: ignore[union-attr]
+    finally:
+        if n_events:
+            op._add_totals(n_events, n_targets, n_below, n_committed, n_quarantined, n_refused)
+    return out

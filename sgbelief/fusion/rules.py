@@ -1,0 +1,174 @@
+"""The steps of Algorithm 1 as small pure functions, each stating its equation.
+
+The operators (:mod:`sgbelief.fusion.operators`) are these steps in the order of Algorithm 1; the
+derivations behind the defaults are in ``docs/method.md``. Nothing here holds state.
+
+==========================  ==========================================================
+step                        function
+==========================  ==========================================================
+verdict (compat, sign rule) :func:`verdict`
+support stratum             :func:`support_stratum`
+calibrated LR (Eq. 2)       :func:`calibrated_log_lr` (used by the calibration slices)
+weight w = w0 kappa T(v)    :func:`evidence_weight`
+increments (Eq. 4)          :func:`claim_increments`
+geometric observation       :func:`verification_increments`
+revision test (KL > tau)    :func:`revision_kl_exceeds` (bound: :func:`kl_upper_bound`)
+==========================  ==========================================================
+"""
+
+from __future__ import annotations
+
+import math
+
+from scipy import special as _sp
+
+from sgbelief.fusion.compatibility import Verdict
+
+__all__ = [
+    "verdict",
+    "support_stratum",
+    "stratified_context",
+    "calibrated_log_lr",
+    "evidence_weight",
+    "claim_increments",
+    "verification_increments",
+    "kl_upper_bound",
+    "revision_kl_exceeds",
+    "stance_of",
+]
+
+_betaln = _sp.betaln
+_digamma = _sp.digamma
+_lgamma = math.lgamma
+_log = math.log
+
+
+def verdict(outcome: int | None, confidence: float) -> Verdict:
+    """compat(phi_f, phi_g) with the sign rule of Alg. 1 line 5.
+
+    ``outcome`` is what the geometric label at (v, t) says of phi: 1 (label in phi's positive
+    set), 0 (negative set) or None (no verifiable assertion). A claim with c >= 0.5 asserts phi,
+    one with c < 0.5 denies it, so::
+
+        compat = ∅  if outcome is None
+                 ⊤  if (outcome == 1) == (c >= 0.5)
+                 ⊥  otherwise
+    """
+    if outcome is None:
+        return Verdict.NO_CLAIM
+    return Verdict.CORROBORATES if (outcome == 1) == (confidence >= 0.5) else Verdict.CONTRADICTS
+
+
+def support_stratum(n_prior_claims: int, n_strata: int) -> int:
+    """The Mondrian support stratum of a claim: min(n, S - 1) for n earlier claims at (v, phi).
+
+    A pair's first claim and its tenth are not exchangeable: spurious detections (hallucinated
+    boxes, a confusion on a partly occluded element) are rarely repeated, so a first claim is
+    right far less often than a repeated one at the same confidence. Calibrating per stratum keeps
+    the calibration (and the conformal guarantee, which needs exchangeability within a cell)
+    valid for each kind of claim. ``n_strata = 1`` is the paper's taxonomy (no stratification).
+    """
+    return n_prior_claims if n_prior_claims < n_strata - 1 else n_strata - 1
+
+
+def stratified_context(context: str, stratum: int, n_strata: int) -> str:
+    """The calibration context key of a claim: ``context`` itself when there is one stratum, else
+    ``"<context>|s<stratum>"`` (the Mondrian cell (context, stratum) for each predicate)."""
+    return context if n_strata <= 1 else f"{context}|s{stratum}"
+
+
+def calibrated_log_lr(p_hat: float, eps: float, log_reference_odds: float) -> float:
+    """log Lambda_hat of Eq. 2 from the isotonic calibrated probability p_hat = p(y = 1 | c).
+
+    By Bayes' rule p(c | y=1) / p(c | y=0) = odds(p_hat) / odds(pi), where pi is the probability of
+    y = 1 before the claim's confidence is seen. p_hat is clipped to [eps, 1 - eps] so the ratio
+    stays finite::
+
+        log Lambda_hat = log(p_hat / (1 - p_hat)) - log_reference_odds
+
+    ``log_reference_odds`` is log(pi / (1 - pi)): the slice's base rate among claims (the paper's
+    reading, ``lr_reference: slice``) or 0, the odds of the Beta(1, 1) prior (``uniform``, the
+    default; derivation in docs/method.md).
+    """
+    if p_hat < eps:
+        p_hat = eps
+    elif p_hat > 1.0 - eps:
+        p_hat = 1.0 - eps
+    return _log(p_hat / (1.0 - p_hat)) - log_reference_odds
+
+
+def evidence_weight(w0: float, kappa: float, mass: float) -> float:
+    """Per-target evidence weight: w T(v) with w = w0 kappa_hat (Eq. 4 and its shrinkage)."""
+    return w0 * kappa * mass
+
+
+def claim_increments(lam: float, weight: float) -> tuple[float, float]:
+    """Eq. 4: (d_alpha, d_beta) = (w T(v) Lambda / (1 + Lambda), w T(v) / (1 + Lambda)).
+
+    ``weight`` is w T(v) (:func:`evidence_weight`). Under a Beta(1, 1) belief and weight 1 this is
+    the exact Bayesian update of y by one observation of likelihood ratio Lambda.
+    """
+    return weight * lam / (1.0 + lam), weight / (1.0 + lam)
+
+
+def verification_increments(outcome: int, weight: float) -> tuple[float, float]:
+    """A decisive geometric label as an observation of y at (v, phi) (``geometric_evidence: verdict``).
+
+    The calibration buffer takes the decisive geometric label as the outcome y of a claim (§4.1);
+    the same label is evidence about the pair, one pseudo-count in its direction::
+
+        (d_alpha, d_beta) = (w T(v), 0) if outcome == 1 else (0, w T(v))
+    """
+    return (weight, 0.0) if outcome == 1 else (0.0, weight)
+
+
+def stance_of(lam: float) -> int:
+    """+1 when the evidence supports phi (Lambda > 1), -1 when it denies it, 0 when neutral."""
+    return 1 if lam > 1.0 else -1 if lam < 1.0 else 0
+
+
+def _digamma_estimate(x: float) -> float:
+    """psi(x) for x > 0 in pure Python (absolute error < 1e-10): recurrence up to x >= 6, then
+    the asymptotic series."""
+    r = 0.0
+    while x < 6.0:
+        r -= 1.0 / x
+        x += 1.0
+    f = 1.0 / (x * x)
+    return r + _log(x) - 0.5 / x - f * (1 / 12 - f * (1 / 120 - f * (1 / 252 - f * (1 / 240 - f / 132))))
+
+
+def kl_upper_bound(a: float, b: float, da: float, db: float) -> float:
+    """An upper bound on KL(Beta(a, b) || Beta(a + da, b + db)) for da, db >= 0 (§4.3 revision test).
+
+    The KL between members of an exponential family is the Bregman divergence of its log-partition
+    A(a, b) = ln B(a, b), so with delta = (da, db) and the Hessian H of A,
+    KL = int_0^1 (1 - s) delta^T H((a, b) + s delta) delta ds, and
+    delta^T H delta = da^2 psi'(a) + db^2 psi'(b) - (da + db)^2 psi'(a + b) <= da^2 psi'(a) + db^2 psi'(b).
+    psi' decreases, so along the path (arguments >= a, b) it is at most its value at (a, b), and
+    psi'(x) = sum_k 1 / (x + k)^2 < 1 / x^2 + 1 / x. Hence
+    KL <= (da^2 (1/a + 1/a^2) + db^2 (1/b + 1/b^2)) / 2.
+    """
+    ia = 1.0 / a
+    ib = 1.0 / b
+    return 0.5 * (da * da * ia * (1.0 + ia) + db * db * ib * (1.0 + ib))
+
+
+def revision_kl_exceeds(a: float, b: float, da: float, db: float, tau_rev: float) -> bool:
+    """The revision test of §4.3: KL(Beta(a, b) || Beta(a + da, b + db)) > tau_rev.
+
+    KL = ln B(a', b') - ln B(a, b) - da psi(a) - db psi(b) + (da + db) psi(a + b).
+    The bound of :func:`kl_upper_bound` settles most calls; otherwise the KL is estimated with
+    ``math.lgamma`` and a pure-Python digamma, and recomputed with ``scipy.special`` only when the
+    estimate lies within a safe margin of ``tau_rev``: the decision is always the exact formula's.
+    """
+    a2, b2 = a + da, b + db
+    margin = 1e-8 * (1.0 + a2 + b2 + da + db)
+    if da >= 0.0 and db >= 0.0 and kl_upper_bound(a, b, da, db) < tau_rev - 2.0 * margin:
+        return False
+    dig = (da + db) * _digamma_estimate(a + b) - da * _digamma_estimate(a) - db * _digamma_estimate(b)
+    est = (_lgamma(a2) + _lgamma(b2) - _lgamma(a2 + b2)) - (_lgamma(a) + _lgamma(b) - _lgamma(a + b)) + dig
+    if abs(est - tau_rev) > margin:
+        return est > tau_rev
+    exact = _betaln(a2, b2) - _betaln(a, b) - da * _digamma(a) - db * _digamma(b) + (da + db) * _digamma(a + b)
+    return bool(exact > tau_rev)
