@@ -31,11 +31,11 @@ import numpy as np
 
 from sgbelief.eval.formats import EventRecord
 from sgbelief.eval.metrics import conformal_coverage, reliability_bins
-from sgbelief.eval.replay import OperatorScores, make_runs, replay, score_run, to_event
+from sgbelief.eval.replay import OperatorRun, OperatorScores, make_runs, replay, score_run, to_event
 from sgbelief.fusion.calibration import MondrianCalibrator
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
-from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator
+from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES, make_operator
 from sgbelief.graph.belief import BetaBelief
 from sgbelief.graph.persistence import atomic_write_text
 from sgbelief.graph.scene_graph import SceneGraph
@@ -66,9 +66,17 @@ def _run(
     events: Sequence[EventRecord], operators: Sequence[str], table: SubsumptionTable, truth: dict, preds: Sequence[str],
     config: OperatorConfig,
 ) -> dict[str, OperatorScores]:
+    return _replay(events, operators, table, truth, preds, config)[0]
+
+
+def _replay(
+    events: Sequence[EventRecord], operators: Sequence[str], table: SubsumptionTable, truth: dict, preds: Sequence[str],
+    config: OperatorConfig,
+) -> tuple[dict[str, OperatorScores], dict[str, OperatorRun]]:
+    """Replay ``events`` under each operator: (scores, runs) by operator name."""
     runs = make_runs(operators, table, config)
     replay(events, runs)
-    return {r.name: score_run(r, truth, preds, tau=config.tau) for r in runs}
+    return {r.name: score_run(r, truth, preds, tau=config.tau) for r in runs}, {r.name: r for r in runs}
 
 
 def _bot_rate(sc: OperatorScores) -> float:
@@ -154,16 +162,60 @@ def real_detector_report(seed: int, alpha: float = 0.1) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------------ trace
-def _contradicted_pair(events: Sequence[EventRecord], table: SubsumptionTable, truth: dict, preds: Sequence[str]) -> tuple[str, str] | None:
-    """The (node, predicate) with ground truth 0 that the model asserts most often against the geometry."""
-    counts: dict[tuple[str, str], int] = {}
+#: the operators Figure 1(a) traces
+TRACE_OPERATORS = ("cal", "comod", "comod_paper")
+#: Figure 1(a)'s element: the pair with the most geometry-contradicted claims among pairs with at least this many claims
+TRACE_MIN_CLAIMS = 10
+TRACE_RULE = (f"the (element, predicate) with the largest share of claims the geometric channel contradicts, among "
+              f"pairs with >= {TRACE_MIN_CLAIMS} claims (ties: more claims, then the first in the log)")
+
+
+def _contradicted_pair(events: Sequence[EventRecord], table: SubsumptionTable, preds: Sequence[str], *,
+                       tau_t: float = 0.1) -> tuple[str, str] | None:
+    """Figure 1(a)'s element, chosen by :data:`TRACE_RULE` (the truth is not consulted)."""
+    claims: dict[tuple[str, str], int] = {}
+    contra: dict[tuple[str, str], int] = {}
     for rec in events:
-        if rec.predicate not in preds or rec.confidence < 0.5:
+        if rec.predicate not in preds:
             continue
         for node, mass in rec.targets.items():
-            if mass > 0.5 and truth.get(node, {}).get(rec.predicate) == 0 and table.outcome(rec.predicate, rec.geometric.get(node)) == 0:
-                counts[(node, rec.predicate)] = counts.get((node, rec.predicate), 0) + 1
-    return max(counts, key=counts.__getitem__) if counts else None
+            if mass <= tau_t:
+                continue
+            key = (node, rec.predicate)
+            claims[key] = claims.get(key, 0) + 1
+            if table.verdict(rec.predicate, rec.geometric.get(node), rec.confidence).value == "contradicts":
+                contra[key] = contra.get(key, 0) + 1
+    eligible = [k for k in contra if claims[k] >= TRACE_MIN_CLAIMS]
+    return max(eligible, key=lambda k: (contra[k] / claims[k], claims[k])) if eligible else None
+
+
+def belief_preservation_pool(events: Sequence[EventRecord], preds: Sequence[str], *, tau_t: float = 0.1,
+                             strong: float = 0.8, weak: float = 0.65) -> set[tuple[str, str]]:
+    """The cross-VLM paragraph's pool: pairs where the model first gives a confident verdict
+    (max(c, 1 - c) >= ``strong``) and a weaker one later (max(c, 1 - c) < ``weak``). Defined on one
+    view (vlm_a) and held fixed under the model swap."""
+    seen_strong: set[tuple[str, str]] = set()
+    pool: set[tuple[str, str]] = set()
+    for rec in events:
+        if rec.predicate not in preds:
+            continue
+        sure = max(rec.confidence, 1.0 - rec.confidence)
+        for node, mass in rec.targets.items():
+            if mass <= tau_t:
+                continue
+            key = (node, rec.predicate)
+            if key in seen_strong and sure < weak:
+                pool.add(key)
+            if sure >= strong:
+                seen_strong.add(key)
+    return pool
+
+
+def brier_on_pairs(graph: SceneGraph, truth: dict, pairs: set[tuple[str, str]]) -> float:
+    """Mean (p - y)^2 of the end-of-stream beliefs over ``pairs`` (nan for an empty pool)."""
+    prov = graph.provenance
+    errs = [(prov.mean(n, p) - truth.get(n, {}).get(p, 0)) ** 2 for n, p in pairs]
+    return float(np.mean(errs)) if errs else math.nan
 
 
 def element_trace(
@@ -171,7 +223,7 @@ def element_trace(
 ) -> dict[str, Any]:
     """Posterior mean and 90 % interval of one (node, predicate) after each event that targets it."""
     node, pred = pair
-    ops = {name: make_operator(name, config, table) for name in ("cal", "comod")}
+    ops = {name: make_operator(name, config, table) for name in TRACE_OPERATORS}
     graphs = {name: SceneGraph() for name in ops}
     trace: dict[str, list] = {name: [] for name in ops}
     contradictions: list[int] = []
@@ -193,6 +245,8 @@ def element_trace(
 
 
 # ---------------------------------------------------------------------------- figures
+_TRACE_COLOURS = {"cal": "#3f7fbf", "comod": "#d9534f", "comod_paper": "#8c8c8c"}
+
 def _plot_reliability(ax: Any, raw: Any, cal: Any, title: str) -> None:
     ax.plot([0, 1], [0, 1], ls="--", color="0.6", lw=1)
     for bins, color, label in ((raw, "#7b3fa0", f"raw (ECE {raw.ece:.3f})"), (cal, "#f0745a", f"calibrated (ECE {cal.ece:.3f})")):
@@ -218,7 +272,8 @@ def make_figures(results: dict[str, Any], out: Path, real: dict[str, Any], sim_c
     fig, axes = plt.subplots(1, 3, figsize=(14, 4))
     if suite is not None:
         tr = traces[suite]
-        for name, color in (("cal", "#3f7fbf"), ("comod", "#d9534f")):
+        truth = tr.get("truth", 0)
+        for name, color in _TRACE_COLOURS.items():
             arr = np.array(tr["trace"][name])
             axes[0].plot(arr[:, 0], arr[:, 1], color=color, label=f"{name}: mean")
             axes[0].fill_between(arr[:, 0], arr[:, 2], arr[:, 3], color=color, alpha=0.2, label=f"{name}: 90% interval")
@@ -227,16 +282,16 @@ def make_figures(results: dict[str, Any], out: Path, real: dict[str, Any], sim_c
         axes[0].axhline(0.5, color="0.5", ls=":", lw=1)
         axes[0].set_ylim(0, 1)
         axes[0].set_xlabel(f"event at {tr['node']} ({tr['predicate']}); grey = geometric contradiction")
-        axes[0].set_ylabel("posterior mean (truth: 0)")
+        axes[0].set_ylabel(f"posterior mean (truth: {truth})")
         axes[0].set_title(f"(a) {tr['events']} events, {len(tr['contradictions'])} contradicted", fontsize=9)
         axes[0].legend(fontsize=7)
         xs = np.linspace(0.001, 0.999, 400)
-        for name, color in (("cal", "#3f7fbf"), ("comod", "#d9534f")):
+        for name, color in _TRACE_COLOURS.items():
             a, b = tr["final"][name]
             axes[2].plot(xs, stats.beta(a, b).pdf(xs), color=color, label=f"{name}: Beta({a:.1f}, {b:.1f}), mean {a / (a + b):.2f}")
-        axes[2].axvline(0.0, color="k", lw=2)
+        axes[2].axvline(float(truth), color="k", lw=2)
         axes[2].set_xlabel("P(predicate)")
-        axes[2].set_title("(c) final Beta posteriors (truth 0)", fontsize=9)
+        axes[2].set_title(f"(c) final Beta posteriors (truth {truth})", fontsize=9)
         axes[2].legend(fontsize=7)
     raw, cal = next(iter(real.values()))["_bins"] if real else sim_cal[next(iter(sim_cal))]["_bins"]
     _plot_reliability(axes[1], raw, cal, f"(b) reliability, real detector ({next(iter(real)) if real else 'sim'}), held-out half")
@@ -280,10 +335,14 @@ def run_bench(
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    config_note = "the shipped default (configs/operators/default.yaml)" if config is None else "a user config"
     config = config or OperatorConfig.default()
+    if config == OperatorConfig.default():
+        config_note = "the shipped default (configs/operators/default.yaml)"
     started = time.perf_counter()
     results: dict[str, Any] = {"meta": {"seed": seed, "suites": list(suites), "operators": list(operators),
-                                        "python": platform.python_version(), "machine": platform.machine()},
+                                        "python": platform.python_version(), "machine": platform.machine(),
+                                        "config_note": config_note, "tau": config.tau, "config": config.model_dump()},
                                "suites": {}}
     jobs = [_SuiteJob(name, seed, str(out), tuple(operators), config.model_dump(), fm_source, scale, retrieval)
             for name in suites]
@@ -334,7 +393,6 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
 
     name, seed, operators = job.name, job.seed, list(job.operators)
     config = OperatorConfig.from_mapping(job.config)
-    uniform = config.model_copy(update={"calibration": config.calibration.model_copy(update={"lr_reference": "uniform"})})
     spec = SUITES[name]
     progress(f"{name}: simulating")
     suite = simulate(name, seed, fm_source=job.fm_source, scale=job.scale)
@@ -344,34 +402,40 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
     suite.write(data_dir, profile="vlm_a", channel="oracle")
     ev_a = suite.events_for("vlm_a", "oracle")
     res: dict[str, Any] = {"title": spec.title, "events": len(ev_a), "sim_stats": _jsonable(suite.stats)}
+    paper = [p for p in PAPER_OPERATOR_NAMES if p.removesuffix("_paper") in operators]
     progress(f"{name}: six operators, vlm_a + oracle channel ({len(ev_a)} events)")
-    main = _run(ev_a, operators, table, suite.truth, preds, config)
+    main, main_runs = _replay(ev_a, operators + paper, table, suite.truth, preds, config)
     res["table2"] = _scores_dict(main)
     progress(f"{name}: six operators, vlm_b (confidence swap)")
-    swap = _run(suite.events_for("vlm_b", "oracle"), operators, table, suite.truth, preds, config)
+    swap, swap_runs = _replay(suite.events_for("vlm_b", "oracle"), operators + paper, table, suite.truth, preds, config)
+    pool = belief_preservation_pool(ev_a, preds, tau_t=config.tau_t)
+    pool_a = {op: brier_on_pairs(run.graph, suite.truth, pool) for op, run in main_runs.items()}
+    pool_b = {op: brier_on_pairs(run.graph, suite.truth, pool) for op, run in swap_runs.items()}
     res["vlm_swap"] = {op: {"brier_vlm_a": main[op].brier, "brier_vlm_b": swap[op].brier,
                             "delta": swap[op].brier - main[op].brier,
+                            "pool_brier_vlm_a": pool_a[op], "pool_brier_vlm_b": pool_b[op],
+                            "pool_delta": pool_b[op] - pool_a[op],
                             "mean_iou_vlm_a": main[op].mean_iou, "mean_iou_vlm_b": swap[op].mean_iou}
-                       for op in operators}
+                       for op in operators + paper}
+    res["belief_preservation_pool"] = len(pool)
     cal_report = trace = None
+    progress(f"{name}: six operators, vlm_a + segmenter channel")
+    seg = _run(suite.events_for("vlm_a", "segmenter"), operators + paper, table, suite.truth, preds, config)
+    res["table2_segmenter"] = _scores_dict(seg)
     if "comod" in operators:
-        progress(f"{name}: comod with the segmenter channel")
-        seg = _run(suite.events_for("vlm_a", "segmenter"), ["comod"], table, suite.truth, preds, config)
         res["table5"] = {"oracle": main["comod"].as_dict(), "segmenter": seg["comod"].as_dict(),
                          "bot_rate_oracle": _bot_rate(main["comod"]), "bot_rate_segmenter": _bot_rate(seg["comod"]),
                          "segmenter_miou": suite.stats.get("segmenter_miou")}
-    progress(f"{name}: ablation lr_reference=uniform")
-    calibrated = [o for o in ("cal", "comod") if o in operators]
-    if calibrated:
-        res["ablation_uniform"] = _scores_dict(_run(ev_a, calibrated, table, suite.truth, preds, uniform))
     c, y, k, p = _verified_claims(ev_a, table, preds)
     if len(c) > 20:
         cal_report = calibration_split(c, y, list(zip(k, p)), seed=seed, alpha=config.alpha)
         res["calibration"] = {kk: v for kk, v in cal_report.items() if not kk.startswith("_")}
-    pair = _contradicted_pair(ev_a, table, suite.truth, preds)
+    pair = _contradicted_pair(ev_a, table, preds, tau_t=config.tau_t)
     if pair is not None:
         progress(f"{name}: trace of contradicted element {pair}")
         trace = element_trace(ev_a, table, pair, config)
+        trace["truth"] = int(suite.truth.get(pair[0], {}).get(pair[1], 0))
+        trace["rule"] = TRACE_RULE
         res["trace"] = {k2: v for k2, v in trace.items() if k2 != "trace"}
     if job.retrieval:
         progress(f"{name}: compound-query retrieval")
@@ -406,17 +470,30 @@ def _f(x: Any, d: int = 3) -> str:
 
 
 def render_markdown(results: dict[str, Any]) -> str:
-    lines = [f"# sgbelief bench (seed {results['meta']['seed']})", ""]
+    lines = [f"# sgbelief bench (seed {results['meta']['seed']})", "",
+             f"Operator configuration for every table: {results['meta'].get('config_note', 'the shipped default')}. "
+             f"Rows `cal_paper` / `comod_paper`: the same with the paper's own settings (lr_reference slice, "
+             f"no support strata, no geometric evidence). Mean IoU averages the suite's evaluated predicates. "
+             f"Best of the six operators in bold.", ""]
     for name, res in results["suites"].items():
         preds = list(SUITES[name].predicates)
         short = [p.removeprefix("is_") for p in preds]
-        lines += [f"## {res['title']} — {res['events']} events", "",
-                  "### Per-class IoU at tau = 0.5 (Table 2 layout; vlm_a, oracle channel)", "",
-                  "| operator | " + " | ".join(short) + " | mean | Brier | ⊥ refusals |",
-                  "|---|" + "---|" * (len(short) + 3)]
-        for op, sc in res["table2"].items():
-            lines.append(f"| {op} | " + " | ".join(_f(sc["per_predicate"][p]["iou"]) for p in preds)
-                         + f" | {_f(sc['mean_iou'])} | {_f(sc['brier'], 4)} | {sc['refusals']} |")
+        lines += [f"## {res['title']} — {res['events']} events", ""]
+        for key, channel in (("table2", "oracle"), ("table2_segmenter", "segmenter")):
+            if key not in res:
+                continue
+            lines += [f"### Per-class IoU (precision / recall) at tau = {results['meta'].get('tau', 0.5)} "
+                      f"(Table 2 layout; vlm_a, {channel} channel)", "",
+                      "| operator | " + " | ".join(short) + " | mean IoU | Brier | ⊥ refusals |",
+                      "|---|" + "---|" * (len(short) + 3)]
+            best = max((op for op in res[key] if op in OPERATOR_NAMES), key=lambda o: res[key][o]["mean_iou"])
+            for op, sc in res[key].items():
+                pp = sc["per_predicate"]
+                name_ = f"**{op}**" if op == best else op
+                lines.append(f"| {name_} | " + " | ".join(f"{_f(pp[p]['iou'])} ({_f(pp[p]['precision'], 2)} / "
+                                                          f"{_f(pp[p]['recall'], 2)})" for p in preds)
+                             + f" | {_f(sc['mean_iou'])} | {_f(sc['brier'], 4)} | {sc['refusals']} |")
+            lines.append("")
         if "table5" in res:
             t5 = res["table5"]
             lines += ["", f"### comod: oracle vs segmenter channel (Table 5 layout; segmenter mIoU {_f(t5.get('segmenter_miou'))})", "",
@@ -428,17 +505,15 @@ def render_markdown(results: dict[str, Any]) -> str:
             lines.append(f"| mean | {_f(t5['oracle']['mean_iou'])} | | | {_f(t5['segmenter']['mean_iou'])} | | | "
                          f"{_f(t5['segmenter']['mean_iou'] - t5['oracle']['mean_iou'])} |")
             lines.append(f"\n⊥-emission rate: oracle {_f(t5['bot_rate_oracle'])}, segmenter {_f(t5['bot_rate_segmenter'])}")
-        lines += ["", "### Cross-VLM invariance: Brier under vlm_a → vlm_b (pairs with evidence)", "",
-                  "| operator | Brier vlm_a | Brier vlm_b | Δ | mean IoU vlm_a | mean IoU vlm_b |", "|---|---|---|---|---|---|"]
+        lines += ["", f"### Cross-VLM invariance: Brier under vlm_a → vlm_b (belief-preservation pool of "
+                  f"{res.get('belief_preservation_pool', 0)} pairs: a confident claim, then a weaker one; and all pairs "
+                  f"with evidence)", "",
+                  "| operator | pool Brier vlm_a | pool vlm_b | pool Δ | all-pairs Brier vlm_a | vlm_b | Δ | "
+                  "mean IoU vlm_a | vlm_b |", "|---|---|---|---|---|---|---|---|---|"]
         for op, v in res["vlm_swap"].items():
-            lines.append(f"| {op} | {_f(v['brier_vlm_a'], 4)} | {_f(v['brier_vlm_b'], 4)} | {v['delta']:+.4f} | "
-                         f"{_f(v['mean_iou_vlm_a'])} | {_f(v['mean_iou_vlm_b'])} |")
-        if "ablation_uniform" in res:
-            lines += ["", "### Ablation: likelihood-ratio reference `calibration.lr_reference: uniform`", "",
-                      "| operator | " + " | ".join(short) + " | mean | Brier |", "|---|" + "---|" * (len(short) + 2)]
-            for op, sc in res["ablation_uniform"].items():
-                lines.append(f"| {op} (uniform) | " + " | ".join(_f(sc["per_predicate"][p]["iou"]) for p in preds)
-                             + f" | {_f(sc['mean_iou'])} | {_f(sc['brier'], 4)} |")
+            lines.append(f"| {op} | {_f(v.get('pool_brier_vlm_a'), 4)} | {_f(v.get('pool_brier_vlm_b'), 4)} | "
+                         f"{v.get('pool_delta', math.nan):+.4f} | {_f(v['brier_vlm_a'], 4)} | {_f(v['brier_vlm_b'], 4)} | "
+                         f"{v['delta']:+.4f} | {_f(v['mean_iou_vlm_a'])} | {_f(v['mean_iou_vlm_b'])} |")
         if "calibration" in res:
             c = res["calibration"]
             lines += ["", f"### Calibration of verified claims (50/50 split, n_eval = {c['n_eval']})", "",
@@ -446,9 +521,10 @@ def render_markdown(results: dict[str, Any]) -> str:
                       f"{_f(c['coverage'])} at 1 − α = {1 - c['alpha']:.2f}, mean set size {_f(c['mean_set_size'])}"]
         if "trace" in res:
             t = res["trace"]
-            fin = {k: v[0] / (v[0] + v[1]) for k, v in t["final"].items()}
-            lines += ["", f"Contradicted element {t['node']} / {t['predicate']}: {t['events']} events, "
-                      f"{len(t['contradictions'])} geometric contradictions; final mean cal {fin['cal']:.3f}, comod {fin['comod']:.3f} (truth 0)."]
+            fin = ", ".join(f"{k} {v[0] / (v[0] + v[1]):.3f}" for k, v in t["final"].items())
+            lines += ["", f"Figure 1(a) element ({t.get('rule', TRACE_RULE)}): {t['node']} / {t['predicate']}, "
+                      f"{t['events']} claims, {len(t['contradictions'])} contradicted by the geometric channel; "
+                      f"final mean {fin} (truth {t.get('truth', '?')})."]
         if "retrieval" in res:
             lines += ["", "### Compound-query retrieval, full pool (Table 3 layout): F1 at p ≥ 0.5", ""]
             ops = list(dict.fromkeys(r["operator"] for r in res["retrieval"]))

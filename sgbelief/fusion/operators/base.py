@@ -10,6 +10,7 @@ from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, resolve_config
 from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion import queues
+from sgbelief.fusion.rules import verdict
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
@@ -17,8 +18,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.graph.scene_graph import SceneGraph
 
 _NO_CLAIM = Verdict.NO_CLAIM
-_CORR = Verdict.CORROBORATES
-_CONTRA = Verdict.CONTRADICTS
 
 
 class BaseOperator:
@@ -121,12 +120,10 @@ class BaseOperator:
             raise UnknownPredicateError(event.predicate, vocab)
 
     def _verdict(self, label: str | None, predicate: str, c: float) -> Verdict:
+        """compat(phi, label) with the sign rule (:func:`sgbelief.fusion.rules.verdict`)."""
         if label is None or self.vocabulary is None:
             return _NO_CLAIM
-        y = self.vocabulary.outcome(predicate, label)
-        if y is None:
-            return _NO_CLAIM
-        return _CORR if (y == 1) == (c >= 0.5) else _CONTRA
+        return verdict(self.vocabulary.outcome(predicate, label), c)
 
     def update(
         self,
@@ -155,35 +152,26 @@ class BaseOperator:
         increment = self._increment
         label_of = channel.label if channel is not None else None
         verdict_of = self._verdict
-        # the default verdict rule, inlined: one table lookup per target
-        table = None
-        if type(self)._verdict is BaseOperator._verdict and self.vocabulary is not None:
-            table = self.vocabulary.outcome_tables().get(pred, {})
-        claim_pos = c >= 0.5
         outcomes = []
         n_targets = n_below = n_committed = 0
         for node, mass in event.targets.items():
             n_targets += 1
             label = label_of(node, t) if label_of is not None else None
-            if table is not None:
-                y = table.get(label) if label is not None else None
-                verdict = _NO_CLAIM if y is None else _CORR if (y == 1) == claim_pos else _CONTRA
-            else:
-                verdict = verdict_of(label, pred, c)
+            v = verdict_of(label, pred, c)
             if mass <= tau_t:
                 n_below += 1
-                outcomes.append(TargetOutcome(node, mass, verdict, Action.BELOW_THRESHOLD))
+                outcomes.append(TargetOutcome(node, mass, v, Action.BELOW_THRESHOLD))
                 continue
             if node not in gnx:
                 graph.ensure_node(node)
             inc = increment(graph, node, pred, c, mass)
             if inc is None:
-                outcomes.append(TargetOutcome(node, mass, verdict, Action.IGNORED))
+                outcomes.append(TargetOutcome(node, mass, v, Action.IGNORED))
                 continue
             da, db = inc
             commit(node, pred, eid, t, da, db, 1 if da > db else -1 if da < db else 0)
             n_committed += 1
-            outcomes.append(TargetOutcome(node, mass, verdict, Action.COMMITTED, da, db))
+            outcomes.append(TargetOutcome(node, mass, v, Action.COMMITTED, da, db))
         self._add_totals(1, n_targets, n_below, n_committed)
         return make_report((eid, t, pred, tuple(outcomes), tuple(resolutions)))
 
