@@ -348,11 +348,11 @@ class _ReferenceCalibrator:
     def likelihood_ratio(self, c: float, k: str, p: str) -> tuple[float, float]:
         cfg, t = self.cfg, self.cfg.target_size
         s, pp, g = (self.levels.get(key, {"n_fit": 0}) for key in ((k, p), ("*", p), ("*", "*")))
+        m = math.log(cfg.lr_max)
+        cc = min(max(c, 1e-6), 1.0 - 1e-6)
+        cold = 0.0 if cfg.cold_start == "neutral" else min(max(math.log(cc / (1.0 - cc)), -m), m)
         if g["n_fit"] == 0:
-            if cfg.cold_start == "neutral":
-                return 1.0, cfg.kappa_min
-            cc = min(max(c, 1e-6), 1.0 - 1e-6)
-            return min(max(cc / (1.0 - cc), 1.0 / cfg.lr_max), cfg.lr_max), cfg.kappa_min
+            return math.exp(cold), cfg.kappa_min
         if s["n_fit"] >= t:
             log_lr = self._log_lr(s, c)
         else:
@@ -360,15 +360,22 @@ class _ReferenceCalibrator:
                 log_lr = self._log_lr(pp, c)
             else:
                 log_lr = self._log_lr(g, c)
+                if g["n_fit"] < t:  # the sparse global level shrinks toward the cold-start rule
+                    lg = g["n_fit"] / t
+                    log_lr = lg * log_lr + (1.0 - lg) * cold
                 if pp["n_fit"]:
                     lp = pp["n_fit"] / t
                     log_lr = lp * self._log_lr(pp, c) + (1.0 - lp) * log_lr
             if s["n_fit"]:
                 ls = s["n_fit"] / t
                 log_lr = ls * self._log_lr(s, c) + (1.0 - ls) * log_lr
-        m = math.log(cfg.lr_max)
         log_lr = min(max(log_lr, -m), m)
-        return math.exp(log_lr), min(max(s["n_fit"] / t, cfg.kappa_min), 1.0)
+        if cfg.kappa_pooling == "pooled":
+            ls, lp = min(1.0, s["n_fit"] / t), min(1.0, pp["n_fit"] / t)
+            kappa = ls + (1.0 - ls) * (lp + (1.0 - lp) * min(1.0, g["n_fit"] / t))
+        else:
+            kappa = s["n_fit"] / t
+        return math.exp(log_lr), min(max(kappa, cfg.kappa_min), 1.0)
 
 
 @settings(max_examples=25, deadline=None)
@@ -379,12 +386,15 @@ class _ReferenceCalibrator:
     st.integers(1, 12),
     st.sampled_from([0.05, 0.1, 0.5]),
     st.integers(0, 2**32 - 1),
+    st.sampled_from(["slice", "pooled"]),
 )
-def test_calibrator_equals_the_reference_exactly(buffer_size, lr_reference, cold_start, min_refit, growth, seed) -> None:
+def test_calibrator_equals_the_reference_exactly(buffer_size, lr_reference, cold_start, min_refit, growth, seed,
+                                                 kappa_pooling) -> None:
     """Every Lambda_hat / kappa_hat, alpha_t, threshold and counter equals (==) the slow reference
     (scikit-learn refit on the window at the same schedule), for several contexts including "*"."""
     cfg = CalibrationConfig(buffer_size=buffer_size, lr_reference=lr_reference, cold_start=cold_start,
-                            min_refit=min_refit, refit_growth=growth, target_size=30, adaptive_gamma=0.05)
+                            min_refit=min_refit, refit_growth=growth, target_size=30, adaptive_gamma=0.05,
+                            kappa_pooling=kappa_pooling)
     rng = np.random.default_rng(seed)
     cal, ref = MondrianCalibrator(cfg, alpha=0.2), _ReferenceCalibrator(cfg, 0.2)
     quant = int(rng.integers(1, 7))

@@ -123,9 +123,10 @@ def test_property2_comod_never_commits_a_contradicted_claim(stream, variant) -> 
             after = g.provenance.alpha_beta(node, pred)
             if op.claims_property2:
                 assert after == before
-            else:  # one observation of the geometric outcome, opposite to the claim's stance
+            else:  # one observation of the geometric outcome (which opposes the refused claim)
                 d = (after[0] - before[0], after[1] - before[1])
-                assert d == ((0.0, 1.0) if c >= 0.5 else (1.0, 0.0))
+                y = TABLE.outcome(pred, label)
+                assert d == pytest.approx((1.0, 0.0) if y == 1 else (0.0, 1.0), abs=1e-9)
         a, b = g.provenance.alpha_beta(node, pred)
         assert math.isfinite(a) and math.isfinite(b) and a > 0 and b > 0
     # and no refused entry is ever counted, whatever happened later

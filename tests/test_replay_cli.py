@@ -43,7 +43,9 @@ def test_replay_writes_table_json_and_graphs(tmp_path: Path, capsys: pytest.Capt
         assert {"mean_iou", "brier", "refusals", "quarantined", "released", "events_per_s"} <= set(d)
     assert doc["comod"]["refusals"] == 40 and doc["cal"]["refusals"] == 0  # one ⊥ per contradicted claim
     g = SceneGraph.load(tmp_path / "graphs" / "comod")
-    assert g.probability("s/car", "is_pedestrian") == 0.5  # every contradicted claim refused
+    # every contradicted claim refused; the 40 'car' labels are 40 observations of "not a pedestrian"
+    assert g.probability("s/car", "is_pedestrian") < 0.05
+    assert all(e.status.value != "committed" or e.d_alpha == 0.0 for e in g.provenance.entries("s/car", "is_pedestrian"))
 
 
 def test_bad_line_stops_without_partial_results(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -83,7 +85,7 @@ def test_several_scenes_with_workers_save_binary_graphs(tmp_path: Path) -> None:
     for name in ("scene_a", "scene_b"):
         g = SceneGraph.load(tmp_path / "g" / "comod" / name)
         assert (tmp_path / "g" / "comod" / name / "graph.npz").exists()
-        assert g.probability("s/car", "is_pedestrian") == 0.5
+        assert g.probability("s/car", "is_pedestrian") < 0.05  # refused; the car labels say otherwise
 
 
 def _replay_json(tmp_path: Path, ev: Path, truth: Path, engine: str, tag: str, *extra: str) -> dict:

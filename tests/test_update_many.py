@@ -23,7 +23,7 @@ from sgbelief.testing import conformance_table, random_stream
 
 TABLE = conformance_table()
 #: short horizons so that queues time out, revisions quarantine and compaction folds in a short stream
-CONFIG = OperatorConfig(tau_rev=0.02, t_prov=15, t_cor=4, t_disagree=3)
+CONFIG = OperatorConfig(tau_rev=0.02, t_prov=15, t_cor=4, t_disagree=3, calibration={"kappa_min": 0.5})
 
 
 def _state(op: Any, graph: SceneGraph, resolutions: list[Any]) -> list[Any]:

@@ -21,7 +21,8 @@ l = min(1, n / target_size) per level; kappa_hat(e) = clip(n_slice / target_size
 (``kappa_pooling: slice``, the paper) or clip(l_s + (1 - l_s) [l_p + (1 - l_p) l_g], kappa_min, 1)
 (``pooled``: the share of the shrunk estimate that rests on fitted data).
 Cold start (no outcome at any level): Lambda = c / (1 - c) ("raw", the model taken at its word,
-at the minimal weight kappa_min) or Lambda = 1 ("neutral").
+at the minimal weight kappa_min) or Lambda = 1 ("neutral"); the hierarchy ends there, so a global
+level with n_g < target_size outcomes is itself shrunk toward it with weight l_g = n_g / target_size.
 """
 
 from __future__ import annotations
@@ -665,13 +666,7 @@ class MondrianCalibrator:
             return _exp(log_lr), 1.0
         cfg = self.config
         if g.n_fit == 0:
-            kappa = cfg.kappa_min
-            if cfg.cold_start == "neutral":
-                return 1.0, kappa
-            cc = min(max(c, 1e-6), 1.0 - 1e-6)
-            lam = cc / (1.0 - cc)
-            lo = 1.0 / cfg.lr_max
-            return (lo if lam < lo else cfg.lr_max if lam > cfg.lr_max else lam), kappa
+            return _exp(self._cold_log_lr(c)), cfg.kappa_min
         ref = self._ref
         # a level with full weight (n >= target_size) makes the coarser ones irrelevant:
         # 1 * x + 0 * y == x, so they are not evaluated
@@ -680,6 +675,10 @@ class MondrianCalibrator:
             log_lr = p.log_lr(c, ref)
         else:
             log_lr = g.log_lr(c, ref)
+            n_g = g.n_fit
+            if n_g < target:  # the hierarchy ends at the cold-start rule: a sparse global level shrinks toward it
+                lg = n_g / target
+                log_lr = lg * log_lr + (1.0 - lg) * self._cold_log_lr(c)
             if n_p:
                 lp = n_p / target
                 log_lr = lp * p.log_lr(c, ref) + (1.0 - lp) * log_lr
@@ -702,6 +701,16 @@ class MondrianCalibrator:
         elif kappa < cfg.kappa_min:
             kappa = cfg.kappa_min
         return _exp(log_lr), kappa
+
+    def _cold_log_lr(self, c: float) -> float:
+        """log Lambda of the cold-start rule: log(c / (1 - c)) clipped to +-log(lr_max) ("raw", the
+        model at its word) or 0 ("neutral")."""
+        if self.config.cold_start == "neutral":
+            return 0.0
+        cc = min(max(c, 1e-6), 1.0 - 1e-6)
+        m = self._log_lr_max
+        lo = _log(cc / (1.0 - cc))
+        return m if lo > m else -m if lo < -m else lo
 
     def calibrated_probability(self, c: float, context: str, predicate: str) -> float:
         """p_hat(y=1 | c) of the most specific fitted slice (slice, then predicate, then global)."""

@@ -97,6 +97,11 @@ class OperatorConfig(_Frozen):
         description="comod: a decisive geometric label also enters the belief as one observation of y "
         "(verdict, default) or is used only to refuse and calibrate (none, the paper)",
     )
+    verdict_sign: Literal["calibrated", "raw"] = Field(
+        "calibrated",
+        description="sign of a claim for the verdict: calibrated Lambda_hat > 1 (default, invariant under "
+        "monotone transforms of c) or raw c >= 0.5 (the paper)",
+    )
     calibration: CalibrationConfig = CalibrationConfig()
     baselines: BaselinesConfig = BaselinesConfig()
 
@@ -146,6 +151,7 @@ class OperatorConfig(_Frozen):
 #: the settings that make an operator config the paper's own (§4, Table 1): reported beside the default
 PAPER_SETTINGS: dict[str, Any] = {
     "geometric_evidence": "none",
+    "verdict_sign": "raw",
     "calibration": {"lr_reference": "slice", "kappa_pooling": "slice", "support_strata": 1},
 }
 
@@ -153,7 +159,8 @@ PAPER_SETTINGS: dict[str, Any] = {
 def paper_variant(config: OperatorConfig) -> OperatorConfig:
     """``config`` with the method options of :data:`PAPER_SETTINGS` (everything else unchanged)."""
     cal = config.calibration.model_copy(update=PAPER_SETTINGS["calibration"])
-    return config.model_copy(update={"geometric_evidence": PAPER_SETTINGS["geometric_evidence"], "calibration": cal})
+    top = {k: v for k, v in PAPER_SETTINGS.items() if k != "calibration"}
+    return config.model_copy(update={**top, "calibration": cal})
 
 
 def resolve_config(config: OperatorConfig | dict[str, Any] | str | Path | None) -> OperatorConfig:

@@ -6,7 +6,8 @@ derivations behind the defaults are in ``docs/method.md``. Nothing here holds st
 ==========================  ==========================================================
 step                        function
 ==========================  ==========================================================
-verdict (compat, sign rule) :func:`verdict`
+sign of the claim           :func:`claim_asserts`
+verdict (compat)            :func:`verdict`
 support stratum             :func:`support_stratum`
 calibrated LR (Eq. 2)       :func:`calibrated_log_lr` (used by the calibration slices)
 weight w = w0 kappa T(v)    :func:`evidence_weight`
@@ -25,6 +26,7 @@ from scipy import special as _sp
 from sgbelief.fusion.compatibility import Verdict
 
 __all__ = [
+    "claim_asserts",
     "verdict",
     "support_stratum",
     "stratified_context",
@@ -43,20 +45,33 @@ _lgamma = math.lgamma
 _log = math.log
 
 
-def verdict(outcome: int | None, confidence: float) -> Verdict:
-    """compat(phi_f, phi_g) with the sign rule of Alg. 1 line 5.
+def claim_asserts(confidence: float, lam: float | None = None) -> bool:
+    """Whether a claim asserts phi (True) or denies it (False): the sign rule of Alg. 1 line 5.
+
+    The paper reads the sign off the raw confidence, c >= 0.5 (``lam=None``; ``verdict_sign:
+    raw``). A monotone distortion of c moves that crossing (an underconfident model says 0.4 of
+    a true table), so the default reads it off the calibrated evidence instead: the claim asserts
+    phi when Lambda_hat > 1 and denies it when Lambda_hat < 1 (raw sign at Lambda_hat = 1). That
+    sign is invariant under any strictly increasing transform of the confidences.
+    """
+    if lam is None or lam == 1.0:
+        return confidence >= 0.5
+    return lam > 1.0
+
+
+def verdict(outcome: int | None, asserts: bool) -> Verdict:
+    """compat(phi_f, phi_g) with the sign of the claim (:func:`claim_asserts`).
 
     ``outcome`` is what the geometric label at (v, t) says of phi: 1 (label in phi's positive
-    set), 0 (negative set) or None (no verifiable assertion). A claim with c >= 0.5 asserts phi,
-    one with c < 0.5 denies it, so::
+    set), 0 (negative set) or None (no verifiable assertion)::
 
         compat = ∅  if outcome is None
-                 ⊤  if (outcome == 1) == (c >= 0.5)
+                 ⊤  if (outcome == 1) == asserts
                  ⊥  otherwise
     """
     if outcome is None:
         return Verdict.NO_CLAIM
-    return Verdict.CORROBORATES if (outcome == 1) == (confidence >= 0.5) else Verdict.CONTRADICTS
+    return Verdict.CORROBORATES if (outcome == 1) == asserts else Verdict.CONTRADICTS
 
 
 def support_stratum(n_prior_claims: int, n_strata: int) -> int:

@@ -63,6 +63,7 @@ def apply_fused(
     comod = op.check_compatibility
     geo = op.observes_geometry
     n_strata = cfg.calibration.support_strata
+    cal_sign = cfg.verdict_sign == "calibrated"
     top = n_strata - 1
     claims = op._claims_of(prov)
     claims_get = claims.get
@@ -82,7 +83,7 @@ def apply_fused(
             if channel is not None and outcome_of is not None:
                 label_of = channel.labels.get if type(channel) is FrameLabels else channel.label
             frame = label_of is not None and type(channel) is FrameLabels
-            claim_pos = c >= 0.5
+            raw_pos = c >= 0.5
             e_targets = e_below = e_committed = e_quarantined = e_refused = 0
             lam = kappa = -1.0
             lam_ctx = None
@@ -99,30 +100,44 @@ def apply_fused(
                 else:
                     label = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
                     y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
-                if y is None:
-                    verdict = _NO_CLAIM
-                else:
-                    verdict = _CORR if (y == 1) == claim_pos else _CONTRA
-                if mass <= tau_t:
-                    e_below += 1
-                    outcomes.append(TargetOutcome(node, mass, verdict, _BELOW))
-                    continue
-                if node not in gnx:
-                    graph.ensure_node(node)
                 key = (node, pred)
                 log = pairs_get(key)
-                if log is None:
-                    a, b = prior_a, prior_b
-                else:
-                    a, b = log.alpha, log.beta
                 if n_strata > 1:
                     n_prev = claims_get(key)
                     if n_prev is None:
                         n_prev = 0 if log is None else op._claims_in_log(prov, node, pred)
-                    claims[key] = n_prev + 1
                     sctx = f"{ctx}|s{n_prev if n_prev < top else top}"
                 else:
                     sctx = ctx
+                if mass <= tau_t:  # discarded; its verdict is only reported
+                    e_below += 1
+                    if y is None:
+                        verdict = _NO_CLAIM
+                    else:
+                        pos = raw_pos
+                        if cal_sign:
+                            lam_b = calibrator.likelihood_ratio(c, sctx, pred)[0]
+                            if lam_b != 1.0:
+                                pos = lam_b > 1.0
+                        verdict = _CORR if (y == 1) == pos else _CONTRA
+                    outcomes.append(TargetOutcome(node, mass, verdict, _BELOW))
+                    continue
+                if n_strata > 1:
+                    claims[key] = n_prev + 1
+                if sctx != lam_ctx:
+                    lam, kappa = calibrator.likelihood_ratio(c, sctx, pred)
+                    lam_ctx = sctx
+                claim_pos = (lam > 1.0) if (cal_sign and lam != 1.0) else raw_pos
+                if y is None:
+                    verdict = _NO_CLAIM
+                else:
+                    verdict = _CORR if (y == 1) == claim_pos else _CONTRA
+                if node not in gnx:
+                    graph.ensure_node(node)
+                if log is None:
+                    a, b = prior_a, prior_b
+                else:
+                    a, b = log.alpha, log.beta
                 if y is not None:
                     new_outcomes.append((y, sctx))
                     if pair_slice is None:
@@ -137,9 +152,6 @@ def apply_fused(
                             commit(node, pred, eid, t, ga, gb, 1 if y == 1 else -1)
                         a += ga
                         b += gb
-                if sctx != lam_ctx:
-                    lam, kappa = calibrator.likelihood_ratio(c, sctx, pred)
-                    lam_ctx = sctx
                 w = w0 * kappa * mass
                 da = w * lam / (1.0 + lam)
                 db = w / (1.0 + lam)

@@ -123,7 +123,7 @@ class BaseOperator:
         """compat(phi, label) with the sign rule (:func:`sgbelief.fusion.rules.verdict`)."""
         if label is None or self.vocabulary is None:
             return _NO_CLAIM
-        return verdict(self.vocabulary.outcome(predicate, label), c)
+        return verdict(self.vocabulary.outcome(predicate, label), c >= 0.5)
 
     def update(
         self,

@@ -21,6 +21,7 @@ from sgbelief.fusion.operators import _calibrated_fast
 from sgbelief.fusion.operators.base import BaseOperator
 from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_exceeds: re-exported)
+    claim_asserts,
     claim_increments,
     evidence_weight,
     kl_upper_bound,
@@ -176,13 +177,14 @@ class CalibratedOperator(BaseOperator):
             for node, mass in event.targets.items():
                 counts[0] += 1
                 y = self._geometric_outcome(channel, node, event)
-                v = verdict(y, event.confidence)
-                if mass <= self.config.tau_t:
+                if mass <= self.config.tau_t:  # discarded; its verdict is only reported
                     counts[1] += 1
+                    context = self._context(event, self._claims_so_far(graph.provenance, node, event.predicate))
+                    v = verdict(y, self._asserts(event, context))
                     outcomes.append(TargetOutcome(node, mass, v, Action.BELOW_THRESHOLD))
                     continue
                 graph.ensure_node(node)
-                action, da, db, res = self._apply_target(graph, event, node, mass, y, v, verified)
+                action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified)
                 resolutions += res
                 counts[{Action.COMMITTED: 2, Action.QUARANTINED: 3, Action.REFUSED: 4}[action]] += 1
                 outcomes.append(TargetOutcome(node, mass, v, action, da, db))
@@ -196,13 +198,15 @@ class CalibratedOperator(BaseOperator):
         return out
 
     def _apply_target(
-        self, graph: SceneGraph, event: EvidenceEvent, node: Any, mass: float, y: int | None, v: Verdict,
+        self, graph: SceneGraph, event: EvidenceEvent, node: Any, mass: float, y: int | None,
         verified: list[tuple[int, str]],
-    ) -> tuple[Action, float, float, list[QueueResolution]]:
-        """Alg. 1 lines 4-19 for one target with T(v) > tau_T: (action, d_alpha, d_beta, resolutions)."""
+    ) -> tuple[Action, Verdict, float, float, list[QueueResolution]]:
+        """Alg. 1 lines 4-19 for one target with T(v) > tau_T: (action, verdict, d_alpha, d_beta, resolutions)."""
         cfg, prov, pred = self.config, graph.provenance, event.predicate
-        stratum = support_stratum(self._next_claim(prov, node, pred), cfg.calibration.support_strata)
-        context = stratified_context(event.context, stratum, cfg.calibration.support_strata)
+        context = self._context(event, self._next_claim(prov, node, pred))  # the claim's Mondrian cell
+        lam, kappa = self.calibrator_.likelihood_ratio(event.confidence, context, pred)  # Eq. 2
+        asserts = claim_asserts(event.confidence, lam if cfg.verdict_sign == "calibrated" else None)
+        v = verdict(y, asserts)
         a, b = prov.alpha_beta(node, pred)
         resolutions: list[QueueResolution] = []
         if y is not None:
@@ -212,13 +216,12 @@ class CalibratedOperator(BaseOperator):
                 ga, gb = verification_increments(y, cfg.w0 * mass)
                 prov.record(node, pred, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1 if y == 1 else -1)
                 a, b = a + ga, b + gb
-        lam, kappa = self.calibrator_.likelihood_ratio(event.confidence, context, pred)  # Eq. 2
         da, db = claim_increments(lam, evidence_weight(cfg.w0, kappa, mass))  # Eq. 4
         if self.check_compatibility and v is _CONTRA:  # refusal (Property 2)
-            stance = -1 if event.confidence >= 0.5 else 1  # geometry's stance opposes the claim
+            stance = -1 if asserts else 1  # geometry's stance opposes the claim
             prov.record(node, pred, event.id, event.t, da, db, EntryStatus.REFUSED, stance)
             resolutions += queues.quarantine_feedback(prov, node, pred, stance, event.id, event.t)
-            return Action.REFUSED, 0.0, 0.0, resolutions
+            return Action.REFUSED, v, 0.0, 0.0, resolutions
         stance = stance_of(lam)
         fb = queues.quarantine_feedback(prov, node, pred, stance, event.id, event.t)
         if fb:
@@ -232,7 +235,19 @@ class CalibratedOperator(BaseOperator):
             action = Action.COMMITTED
         if self.check_compatibility and v is _CORR:  # later agreement resolves pending ⊥ at (v, phi)
             resolutions += queues.resolve_disagreements(prov, node, pred, event.t)
-        return action, da, db, resolutions
+        return action, v, da, db, resolutions
+
+    def _context(self, event: EvidenceEvent, n_prior_claims: int) -> str:
+        """The calibration context of a claim with ``n_prior_claims`` earlier claims at its pair."""
+        n = self.config.calibration.support_strata
+        return stratified_context(event.context, support_stratum(n_prior_claims, n), n)
+
+    def _asserts(self, event: EvidenceEvent, context: str) -> bool:
+        """The claim's sign (:func:`~sgbelief.fusion.rules.claim_asserts`) in calibration context ``context``."""
+        if self.config.verdict_sign == "raw":
+            return claim_asserts(event.confidence)
+        lam, _ = self.calibrator_.likelihood_ratio(event.confidence, context, event.predicate)
+        return claim_asserts(event.confidence, lam)
 
     def _geometric_outcome(self, channel: GeometricChannel | None, node: Any, event: EvidenceEvent) -> int | None:
         """y of the geometric label at (v, t) for the claimed predicate (1, 0, or None: ∅)."""
@@ -270,14 +285,17 @@ class CalibratedOperator(BaseOperator):
                 n += 1
         return n
 
+    def _claims_so_far(self, prov: ProvenanceStore, node: Any, predicate: str) -> int:
+        """Claims applied at (v, phi) so far (counted from the log the first time a pair is seen)."""
+        n = self._claims_of(prov).get((node, predicate))
+        if n is None:
+            n = self._claims_in_log(prov, node, predicate) if (node, predicate) in prov else 0
+        return n
+
     def _next_claim(self, prov: ProvenanceStore, node: Any, predicate: str) -> int:
         """Earlier claims at (v, phi), counting this one for the next."""
-        claims = self._claims_of(prov)
-        key = (node, predicate)
-        n = claims.get(key)
-        if n is None:
-            n = self._claims_in_log(prov, node, predicate) if key in prov else 0
-        claims[key] = n + 1
+        n = self._claims_so_far(prov, node, predicate)
+        self._claims_of(prov)[(node, predicate)] = n + 1
         return n
 
     # ---------------------------------------------------------- reading
