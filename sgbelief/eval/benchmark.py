@@ -469,12 +469,34 @@ def _f(x: Any, d: int = 3) -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{d}f}"
 
 
+def _summary_table(results: dict[str, Any]) -> list[str]:
+    """The demo's subset of the robustness grid: mean IoU per (suite, profile, channel) cell."""
+    rows: list[tuple[str, dict[str, float]]] = []
+    for name, res in results["suites"].items():
+        if "table2" in res:
+            rows.append((f"{name} / vlm_a / oracle", {op: sc["mean_iou"] for op, sc in res["table2"].items()}))
+        if "table2_segmenter" in res:
+            rows.append((f"{name} / vlm_a / segmenter", {op: sc["mean_iou"] for op, sc in res["table2_segmenter"].items()}))
+        if "vlm_swap" in res:
+            rows.append((f"{name} / vlm_b / oracle", {op: v["mean_iou_vlm_b"] for op, v in res["vlm_swap"].items()}))
+    if not rows:
+        return []
+    ops = list(rows[0][1])
+    out = ["## Summary: mean IoU per cell (a subset of `sgbelief bench --grid`; parametric confidences)", "",
+           "| suite / profile / channel | " + " | ".join(ops) + " |", "|---" * (len(ops) + 1) + "|"]
+    for label, row in rows:
+        best = max((o for o in row if o in OPERATOR_NAMES), key=row.__getitem__)
+        out.append(f"| {label} | " + " | ".join(f"**{_f(row[o])}**" if o == best else _f(row[o]) for o in ops) + " |")
+    return out + [""]
+
+
 def render_markdown(results: dict[str, Any]) -> str:
     lines = [f"# sgbelief bench (seed {results['meta']['seed']})", "",
              f"Operator configuration for every table: {results['meta'].get('config_note', 'the shipped default')}. "
              f"Rows `cal_paper` / `comod_paper`: the same with the paper's own settings (lr_reference slice, "
              f"no support strata, no geometric evidence). Mean IoU averages the suite's evaluated predicates. "
              f"Best of the six operators in bold.", ""]
+    lines += _summary_table(results)
     for name, res in results["suites"].items():
         preds = list(SUITES[name].predicates)
         short = [p.removeprefix("is_") for p in preds]
