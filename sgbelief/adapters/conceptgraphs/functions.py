@@ -63,6 +63,14 @@ def _class_id_scalar(class_ids: Any, cid: int) -> Any:
     return dtype.type(cid) if dtype.kind in "iu" else np.int64(cid)
 
 
+def _log_only(fn: Any) -> None:
+    """Run a ConceptGraphs logging-counter update; a tracker of another shape is not an error."""
+    try:
+        fn()
+    except (AttributeError, KeyError, TypeError):
+        pass
+
+
 def _list_type(objects: Any) -> Any:
     from sgbelief.adapters.conceptgraphs.standins import MapObjectList
 
@@ -274,9 +282,14 @@ def make_functions(backend: ConceptGraphsBackend, generation: str, originals: di
         sims = last[0] if last is not None and last[1] is match_indices else None
         thr = last[2] if sims is not None else NEG_INF
         n_before = len(objects)
+        tracker = helper("tracker")
+        count_before = getattr(tracker, "curr_object_count", 0) if tracker is not None else 0
         for i, j in enumerate(match_indices):
             det = detection_list[i]
             if j is None:
+                if tracker is not None:  # as ConceptGraphs' merge_obj_matches does
+                    _log_only(lambda: tracker.object_dict.update(
+                        {"id": det["id"], "first_discovered": tracker.curr_frame_idx}))
                 objects.append(det)
                 backend.ensure_node(det)
                 continue
@@ -287,12 +300,9 @@ def make_functions(backend: ConceptGraphsBackend, generation: str, originals: di
             backend.route_detection(det, targets)
             objects[j] = geo_merge_ali(objects[j], det, downsample_voxel_size, dbscan_remove_noise, dbscan_eps,
                                        dbscan_min_points, spatial_sim_type, device, False)
-        tracker = helper("tracker")
-        if tracker is not None:
-            try:
-                tracker.increment_total_merges(len(match_indices) - match_indices.count(None))
-            except Exception:  # logging only  # noqa: BLE001
-                pass
+        if tracker is not None:  # ConceptGraphs' MappingTracker counters, updated as the original does
+            _log_only(lambda: tracker.increment_total_merges(len(match_indices) - match_indices.count(None)))
+            _log_only(lambda: tracker.increment_total_objects(len(objects) - count_before))
         sync_labels(objects)
         backend.end_frame()
         return objects
