@@ -175,6 +175,11 @@ class ConceptGraphsBackend:
         self._last_t = None
         self._pending_targets: dict[int, dict[Any, float]] = {}
         self._last_match: tuple[Any, Any, float] | None = None
+        #: list indices of the map objects a patched per-frame merge touched (their labels are re-read)
+        self._touched_idx: set[int] = set()
+        #: map-list length after the last label sync; objects appended beyond it by the script itself
+        #: (the first frame's ``extend``) are registered at the next per-frame merge
+        self._synced_len = 0
         self.reports: list[Any] = []
         self.keep_reports = False
         self._patcher: Any = None
@@ -308,10 +313,16 @@ class ConceptGraphsBackend:
         alone gets mass 1 when no candidate has a positive score.  The caller drops T(v) <= tau_T.
         """
         scores = np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float).ravel()
-        cand = [j for j, s in enumerate(scores) if np.isfinite(s) and s > threshold and j < len(objects)]
-        pos = {j: scores[j] for j in cand if scores[j] > 0}
+        n = min(len(scores), len(objects))
+        s = scores[:n]
+        # candidates found in numpy: the per-detection cost does not grow with the map's size
+        cand = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0)).tolist()
+        pos = {j: float(s[j]) for j in cand}
+        touched = self._touched_idx
         if len(pos) <= 1 or best not in pos:
+            touched.add(best)
             return {self.ensure_node(objects[best]): 1.0}
+        touched.update(pos)
         total = sum(pos.values())
         out: dict[Any, float] = {}
         for j, s in pos.items():
