@@ -157,7 +157,9 @@ def detect(world: World, k: int, rng: np.random.Generator, *, min_pixels: int = 
             "class_id": np.asarray(cls, dtype=int), "mask": np.asarray(masks, dtype=bool).reshape(-1, h, w),
             "classes": classes, "image_feats": np.asarray(img_f, dtype=np.float32).reshape(-1, feat_dim),
             "text_feats": np.asarray(txt_f, dtype=np.float32).reshape(-1, feat_dim),
-            "captions": [""] * len(masks), "detection_class_labels": [classes[c] for c in cls]}
+            # ali-dev's filter_gobs pairs captions with "name id" labels
+            "captions": [{"id": str(k), "name": classes[c], "caption": ""} for k, c in enumerate(cls)],
+            "detection_class_labels": [f"{classes[c]} {k}" for k, c in enumerate(cls)]}
     return Detections(gobs, truth)
 
 
@@ -361,7 +363,9 @@ def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 
                                          mask_conf_threshold=cfg.mask_conf_threshold)
                 if len(gobs["mask"]) == 0:
                     continue
-                gobs["mask"] = utils.mask_subtract_contained(gobs["xyxy"], gobs["mask"])
+                from conceptgraph.utils.ious import mask_subtract_contained
+
+                gobs["mask"] = mask_subtract_contained(gobs["xyxy"], gobs["mask"])
                 pcds = utils.detections_to_obj_pcd_and_bbox(
                     depth_array=fr.depth, masks=gobs["mask"], cam_K=world.K, image_rgb=fr.rgb, trans_pose=pose,
                     min_points_threshold=cfg.min_points_threshold, spatial_sim_type=cfg.spatial_sim_type,
