@@ -188,3 +188,55 @@ def test_gc_checkpoint_freezes_and_uninstall_unfreezes() -> None:
         assert gc.get_freeze_count() == 0
     finally:
         gc.unfreeze()
+
+
+def _frame_opcodes_through_the_merge(generation: str, n_obj: int) -> Counter[str]:
+    """Bytecodes (and calls) of sgbelief code in one patched per-frame merge of one detection into a
+    map of ``n_obj`` objects (the geometric merge stubbed out: only the backend's own work counts)."""
+    import torch
+
+    backend = ConceptGraphsBackend("majority", class_names=CLASSES)
+    keep = lambda *a, **k: a[1] if generation == "main" else k.get("obj1", a[0] if a else None)  # noqa: E731
+    fns = make_functions(backend, generation, originals={"merge_obj2_into_obj1": keep})
+    objs = [{"class_id": [o % 4], "conf": [0.8], "image_idx": [0], "mask_idx": [o], "class_name": [CLASSES[o % 4]],
+             "id": f"obj-{o}"} for o in range(n_obj)]
+    for o in objs:
+        backend.ensure_node(o)
+    backend._synced_len = len(objs)
+    det = {"class_id": [1], "conf": [0.9], "image_idx": [1], "mask_idx": [0], "class_name": [CLASSES[1]], "id": "det"}
+    sims = torch.full((1, n_obj), float("-inf"))
+    sims[0, 3] = 1.5
+    counts: Counter[str] = Counter()
+
+    def local(frame: Any, event: str, arg: Any) -> Any:
+        if event == "opcode":
+            counts["<opcodes>"] += 1
+        return local
+
+    def trace(frame: Any, event: str, arg: Any) -> Any:
+        if "sgbelief" not in frame.f_code.co_filename:
+            return None
+        counts[frame.f_code.co_qualname] += 1
+        frame.f_trace_opcodes = True
+        return local
+
+    old = sys.gettrace()
+    sys.settrace(trace)
+    try:
+        if generation == "main":
+            out = fns.merge_detections_to_objects(None, [det], objs, sims)
+        else:
+            idx = fns.match_detections_to_objects(sims, 1.1)
+            out = fns.merge_obj_matches([det], objs, idx, 0.05, False, 0.1, 10, "iou", "cpu")
+    finally:
+        sys.settrace(old)
+    assert len(out) == n_obj
+    return counts
+
+
+@pytest.mark.parametrize("generation", ["main", "ali-dev"])
+def test_per_frame_merge_work_does_not_grow_with_map_size(generation: str) -> None:
+    # one detection into a map of 12 or 120 objects: the backend executes the same bytecodes
+    small = _frame_opcodes_through_the_merge(generation, 12)
+    large = _frame_opcodes_through_the_merge(generation, 120)
+    assert small == large

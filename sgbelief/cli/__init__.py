@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "retrieval": ("sgbelief.cli.retrieval", "compound-query retrieval F1 per operator"),
     "import-cg": ("sgbelief.cli.import_cg", "import a saved ConceptGraphs map and replay its detections"),
     "inspect": ("sgbelief.cli.inspect", "show a saved graph's beliefs and provenance"),
+    "vocab": ("sgbelief.cli.vocab", "check an open-vocabulary class list: what contradicts what"),
 }
 
 

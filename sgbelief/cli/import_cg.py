@@ -15,6 +15,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--context", default="conceptgraphs", help="context tag kappa of the events")
     parser.add_argument("--operator-config", default=None, help="operator config YAML")
     parser.add_argument("--out", default="results/import-cg", help="output directory (graph.json, labels.json)")
+    parser.add_argument("--channel", default=None, metavar="SCENE_DIR",
+                        help="geometric channel: ScanNet mesh labels (NYU40) of this ScanNet scene folder, "
+                             "read at each object's points")
+    parser.add_argument("--first-pose", default=None,
+                        help="with --channel: the pose file of the map's frame 0 (default SCENE_DIR/pose/0.txt "
+                             "if present; 'none': the map is in the mesh frame)")
     parser.add_argument("--graph-format", choices=["json", "npz"], default="json",
                         help="save the graph as graph.json (default) or graph.npz (binary layout for large maps)")
 
@@ -23,8 +29,14 @@ def run(args: argparse.Namespace) -> int:
     from sgbelief.adapters.conceptgraphs.backend import ConceptGraphsBackend
     from sgbelief.adapters.conceptgraphs.importer import import_file
 
+    channel = None
+    if args.channel is not None:
+        from sgbelief.adapters.conceptgraphs.channels import scannet_mesh_channel
+
+        first = False if (args.first_pose or "").lower() == "none" else args.first_pose
+        channel = scannet_mesh_channel(args.channel, first_pose=first)
     backend = ConceptGraphsBackend(args.operator, vocabulary=args.vocab, context=args.context,
-                                   operator_config=args.operator_config)
+                                   operator_config=args.operator_config, channel=channel)
     summary = import_file(args.result, backend)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -34,5 +46,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"imported {summary.n_objects} objects, {summary.n_detections} detections, "
           f"{summary.n_events} evidence events ({args.operator})")
     print(f"labels differing from ConceptGraphs' majority vote: {changed}/{summary.n_objects}")
+    print(f"objects left unknown (nothing commits): {summary.n_unknown}/{summary.n_objects}")
     print(f"wrote {graph_path} and {out / 'labels.json'}")
     return 0

@@ -33,12 +33,14 @@ def normalise_class_name(name: str) -> str:
 
 class PredicateSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-    positive: list[str] = Field(min_length=1)
+    positive: list[str] = Field(default_factory=list)
     negative: list[str] = Field(default_factory=list)
     aliases: list[str] = Field(default_factory=list)
 
     @model_validator(mode="after")
     def _disjoint(self) -> PredicateSpec:
+        if not self.positive and not self.negative:
+            raise ValueError("a predicate needs a positive or a negative label set")
         both = set(self.positive) & set(self.negative)
         if both:
             raise ValueError(f"labels {sorted(both)} are in both the positive and the negative set")
@@ -100,11 +102,15 @@ class SubsumptionTable:
         self.name = parsed.name
         self.specs: dict[str, PredicateSpec] = dict(parsed.predicates)
         self.labels: frozenset[str] | None = frozenset(parsed.labels) if parsed.labels else None
+        #: labels that decide nothing for any predicate (open-vocabulary tables: otherprop, object, ...)
+        self.ambiguous_labels: frozenset[str] = frozenset()
         self._outcomes: dict[str, dict[str, int]] = {}
         self._alias: dict[str, str] = {}
         for pred, spec in self.specs.items():
             table = {lab: 0 for lab in spec.negative}
             table.update({lab: 1 for lab in spec.positive})
+            for lab, y in list(table.items()):  # a channel may spell 'office chair' as 'office_chair'
+                table.setdefault(normalise_class_name(lab), y)
             self._outcomes[pred] = table
             for alias in [*spec.aliases, *spec.positive]:
                 self._alias.setdefault(normalise_class_name(alias), pred)
@@ -131,6 +137,27 @@ class SubsumptionTable:
         table = cls.__new__(cls)
         table._init(parsed)
         return table
+
+    @classmethod
+    def _from_specs(cls, specs: Mapping[str, PredicateSpec], *, name: str, labels: Iterable[str]) -> SubsumptionTable:
+        """A table from already-validated specs (the open-vocabulary derivation), no re-validation."""
+        table = cls.__new__(cls)
+        table._init(VocabularyFile.model_construct(format="sgbelief.vocabulary", version=1, name=name,
+                                                   labels=list(labels), predicates=dict(specs)))
+        return table
+
+    @classmethod
+    def from_class_list(cls, classes: Any, taxonomy: Any = "indoor", mapping: Any = None, *,
+                        ignore: Iterable[str] = (), name: str | None = None) -> SubsumptionTable:
+        """Derive a table from a detector class list, a taxonomy and an optional label mapping.
+
+        Concrete classes are mutually exclusive; taxonomy groups (synonyms, hyponyms) share a
+        predicate; hypernym labels corroborate only predicates covering all their classes;
+        ambiguous labels decide nothing. See :mod:`sgbelief.fusion.open_vocab`.
+        """
+        from sgbelief.fusion.open_vocab import derive_table
+
+        return derive_table(classes, taxonomy, mapping, ignore=ignore, name=name)
 
     @classmethod
     def shipped(cls, name: str) -> SubsumptionTable:

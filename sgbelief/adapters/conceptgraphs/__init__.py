@@ -28,6 +28,10 @@ _EXPORTS = {
     "UnsafePickleError": "sgbelief.adapters.conceptgraphs.unpickler",
     "load_cg_result": "sgbelief.adapters.conceptgraphs.unpickler",
     "import_result": "sgbelief.adapters.conceptgraphs.importer",
+    "BackendSummary": "sgbelief.adapters.conceptgraphs.backend",
+    "PointCloudChannel": "sgbelief.adapters.conceptgraphs.channels",
+    "scannet_mesh_channel": "sgbelief.adapters.conceptgraphs.channels",
+    "LabelImageChannel": "sgbelief.fusion.channel",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -30,15 +30,22 @@ class Claim(NamedTuple):
 
 
 class _EventChannel:
-    """Geometric channel for one event: the detection's own label first, then the configured channel."""
+    """Geometric channel for one event: the detection's own label first, then the configured channel.
 
-    __slots__ = ("_label", "_detection", "_fallback", "_fn")
+    A configured channel with ``label_detection(detection, index, t)`` (a :class:`DetectionChannel`
+    such as :class:`~sgbelief.fusion.channel.LabelImageChannel`) is asked about entry ``index`` of
+    the detection dict; any other channel through ``label(node, t)``.
+    """
 
-    def __init__(self, label: str | None, detection: dict | None, fallback: Any, fn: DetectionLabelFn | None) -> None:
+    __slots__ = ("_label", "_detection", "_fallback", "_fn", "_index")
+
+    def __init__(self, label: str | None, detection: dict | None, fallback: Any, fn: DetectionLabelFn | None,
+                 index: int = 0) -> None:
         self._label = label
         self._detection = detection
         self._fallback = fallback
         self._fn = fn
+        self._index = index
 
     def label(self, node: Any, t: int) -> str | None:
         if self._label is not None:
@@ -47,9 +54,26 @@ class _EventChannel:
             value = self._fn(self._detection, node, t)
             if value is not None:
                 return value
-        if self._fallback is not None:
-            return self._fallback.label(node, t)
+        fallback = self._fallback
+        if fallback is not None:
+            by_detection = getattr(fallback, "label_detection", None)
+            if by_detection is not None and self._detection is not None:
+                value = by_detection(self._detection, self._index, t)
+                if value is not None:
+                    return value
+            return fallback.label(node, t)
         return None
+
+
+class BackendSummary(NamedTuple):
+    """Counts over the backend's live map objects (see :meth:`ConceptGraphsBackend.summary`)."""
+
+    objects: int  #: live (not merged away, not filtered) objects the backend tracks
+    labelled: int  #: objects whose label comes from a committed predicate
+    unknown: int  #: objects left unknown: nothing commits (``unknown_label`` / ``unknown_class_id``)
+    filtered: int  #: objects ConceptGraphs filtered (marked ``cg_filtered``)
+    detections: int  #: per-detection claims routed
+    events: int  #: evidence entries in the graph
 
 
 class ConceptGraphsBackend:
@@ -70,6 +94,11 @@ class ConceptGraphsBackend:
         confidence_map: optional map of the detector's raw confidence before it enters an event.
         gc_checkpoints: call :meth:`gc_checkpoint` once per frame (after the patched per-frame
             merge), so CPython's full collections never rescan the whole map.
+        label_rule: the class written when the committed predicate covers several class names
+            (``is_table_or_desk``: table, desk): ``"most_frequent"`` (default: the name detected most
+            often on this object, ties to the first seen), ``"first"`` (the first name detected), or a
+            mapping predicate -> class name (e.g. ``{"is_table_or_desk": "table"}``; predicates not in
+            it fall back to most frequent). A mapped name that is a known class id keeps that id.
     """
 
     def __init__(
@@ -90,6 +119,7 @@ class ConceptGraphsBackend:
         confidence_map: Callable[[float], float] | None = None,
         class_names: Sequence[str] | None = None,
         gc_checkpoints: bool = False,
+        label_rule: str | Mapping[str, str] = "most_frequent",
     ) -> None:
         from sgbelief.fusion.channel import NullChannel
         from sgbelief.graph.scene_graph import SceneGraph
@@ -145,12 +175,23 @@ class ConceptGraphsBackend:
         self._last_t = None
         self._pending_targets: dict[int, dict[Any, float]] = {}
         self._last_match: tuple[Any, Any, float] | None = None
+        #: list indices of the map objects a patched per-frame merge touched (their labels are re-read)
+        self._touched_idx: set[int] = set()
+        #: map-list length after the last label sync; objects appended beyond it by the script itself
+        #: (the first frame's ``extend``) are registered at the next per-frame merge
+        self._synced_len = 0
         self.reports: list[Any] = []
         self.keep_reports = False
         self._patcher: Any = None
         self.active = True
         self.gc_checkpoints = bool(gc_checkpoints)
         self._froze = False
+        if isinstance(label_rule, str):
+            if label_rule not in ("most_frequent", "first"):
+                raise ValueError("label_rule must be 'most_frequent', 'first' or a mapping predicate -> class name")
+            self.label_rule: str | dict[str, str] = label_rule
+        else:
+            self.label_rule = dict(label_rule)
         from sgbelief.fusion.operators.base import BaseOperator
 
         # sgbelief's own operators can skip building per-target reports nobody reads, and their
@@ -246,7 +287,7 @@ class ConceptGraphsBackend:
             if self.table is not None and pred not in self.table:
                 channel: Any = self._null  # no verification possible for this predicate
             else:
-                channel = _EventChannel(label, det, self.channel, self.channel_fn)
+                channel = _EventChannel(label, det, self.channel, self.channel_fn, k)
             if self._last_t is not None and claim.t > self._last_t:
                 self.operator.tick(self.graph, claim.t)
             self._last_t = claim.t if self._last_t is None else max(self._last_t, claim.t)
@@ -272,10 +313,16 @@ class ConceptGraphsBackend:
         alone gets mass 1 when no candidate has a positive score.  The caller drops T(v) <= tau_T.
         """
         scores = np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float).ravel()
-        cand = [j for j, s in enumerate(scores) if np.isfinite(s) and s > threshold and j < len(objects)]
-        pos = {j: scores[j] for j in cand if scores[j] > 0}
+        n = min(len(scores), len(objects))
+        s = scores[:n]
+        # candidates found in numpy: the per-detection cost does not grow with the map's size
+        cand = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0)).tolist()
+        pos = {j: float(s[j]) for j in cand}
+        touched = self._touched_idx
         if len(pos) <= 1 or best not in pos:
+            touched.add(best)
             return {self.ensure_node(objects[best]): 1.0}
+        touched.update(pos)
         total = sum(pos.values())
         out: dict[Any, float] = {}
         for j, s in pos.items():
@@ -391,6 +438,19 @@ class ConceptGraphsBackend:
         if not counts:
             return None
         predicate = self._predicate
+        rule = self.label_rule
+        if rule == "first":
+            for key in counts:  # Counter keeps first-seen order
+                if predicate(key[1]) == pred:
+                    return key
+            return None
+        if not isinstance(rule, str) and pred in rule:
+            name = rule[pred]
+            for key in counts:
+                if key[1] == name:
+                    return key
+            cid = next((i for i, n in self.class_names.items() if n == name), None)
+            return (cid, name)
         best, best_n = None, 0
         for key, n in counts.items():  # most frequent; ties keep first-seen order
             if n > best_n and predicate(key[1]) == pred:
@@ -434,6 +494,21 @@ class ConceptGraphsBackend:
         """Called by the patched per-frame merge functions: the per-frame housekeeping hook."""
         if self.gc_checkpoints:
             self.gc_checkpoint()
+
+    def summary(self, objects: Sequence[Mapping[str, Any]] | None = None) -> BackendSummary:
+        """Counts of labelled and ``unknown`` objects (nothing commits), over ``objects`` (a map
+        object list) or every live node the backend tracks."""
+        if objects is not None:
+            nodes = [n for n in (self.node_of(o) for o in objects) if n is not None and n in self.graph]
+        else:
+            nodes = [n for n in self.graph.nodes() if n in self._names_per_node]
+        attrs = self.graph.nx.nodes
+        filtered = sum(1 for n in nodes if attrs[n].get("cg_filtered"))
+        live = [n for n in nodes if not attrs[n].get("cg_filtered")]
+        labelled = sum(1 for n in live if self._class_for(n, self.committed_predicate(n)) is not None)
+        return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
+                              filtered=filtered, detections=self._routed_detections,
+                              events=self.evidence_count())
 
     def evidence_count(self) -> int:
         return int(self.graph.evidence_count())

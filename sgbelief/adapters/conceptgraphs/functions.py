@@ -63,6 +63,14 @@ def _class_id_scalar(class_ids: Any, cid: int) -> Any:
     return dtype.type(cid) if dtype.kind in "iu" else np.int64(cid)
 
 
+def _log_only(fn: Any) -> None:
+    """Run a ConceptGraphs logging-counter update; a tracker of another shape is not an error."""
+    try:
+        fn()
+    except (AttributeError, KeyError, TypeError):
+        pass
+
+
 def _list_type(objects: Any) -> Any:
     from sgbelief.adapters.conceptgraphs.standins import MapObjectList
 
@@ -86,9 +94,15 @@ def make_functions(backend: ConceptGraphsBackend, generation: str, originals: di
         return None if patcher is None else patcher.helper(name)
 
     # ---------------------------------------------------------------- shared pieces
-    def sync_labels(objects: Any) -> None:
-        """Write the belief label into every ``ali-dev`` object's ``class_name`` (adopting the dict)."""
-        for k, obj in enumerate(objects):
+    def sync_labels(objects: Any, indices: Any = None) -> None:
+        """Write the belief label into ``ali-dev`` objects' ``class_name`` (adopting the dict).
+
+        ``indices``: only these list positions (the objects a frame's detections touched); the
+        per-frame merges pass them, so a frame costs O(its detections), not O(map size)."""
+        positions = range(len(objects)) if indices is None else sorted(i for i in indices if i < len(objects))
+        backend._synced_len = len(objects)
+        for k in positions:
+            obj = objects[k]
             node = backend.ensure_node(obj)
             backend.refresh_geometry(obj)
             if generation != "ali-dev":
@@ -102,6 +116,14 @@ def make_functions(backend: ConceptGraphsBackend, generation: str, originals: di
             label = backend.label_of(obj)
             if label is not None:
                 dict.__setitem__(obj, "class_name", label)
+
+    def frame_start(objects: Any) -> set[int]:
+        """The touched-index set for a per-frame merge, seeded with objects the script appended itself."""
+        touched = backend._touched_idx
+        touched.clear()
+        start = backend._synced_len if backend._synced_len <= len(objects) else 0
+        touched.update(range(start, len(objects)))
+        return touched
 
     def mark_removed(before: list, after: Any) -> None:
         kept = {id(o) for o in after}
@@ -135,18 +157,20 @@ def make_functions(backend: ConceptGraphsBackend, generation: str, originals: di
 
     def assign(detection_list: Any, objects: Any, agg_sim: Any, threshold: float, merge_one: Any) -> Any:
         """Shared association loop: new object when the row has no candidate, else spread + merge."""
+        touched = frame_start(objects)
         for i in range(agg_sim.shape[0]):
             row = agg_sim[i]
             det = detection_list[i]
             if float(row.max()) <= threshold or float(row.max()) == NEG_INF:
                 objects.append(det)
                 backend.ensure_node(det)
+                touched.add(len(objects) - 1)
                 continue
             j = int(row.argmax())
             targets = backend.targets_for(row, j, objects, threshold)
             backend.route_detection(det, targets)
             objects[j] = merge_one(objects[j], det)
-        sync_labels(objects)
+        sync_labels(objects, touched)
         backend.end_frame()
         return objects
 
@@ -274,26 +298,31 @@ def make_functions(backend: ConceptGraphsBackend, generation: str, originals: di
         sims = last[0] if last is not None and last[1] is match_indices else None
         thr = last[2] if sims is not None else NEG_INF
         n_before = len(objects)
+        touched = frame_start(objects)
+        tracker = helper("tracker")
+        count_before = getattr(tracker, "curr_object_count", 0) if tracker is not None else 0
         for i, j in enumerate(match_indices):
             det = detection_list[i]
             if j is None:
+                if tracker is not None:  # as ConceptGraphs' merge_obj_matches does
+                    _log_only(lambda: tracker.object_dict.update(
+                        {"id": det["id"], "first_discovered": tracker.curr_frame_idx}))
                 objects.append(det)
                 backend.ensure_node(det)
+                touched.add(len(objects) - 1)
                 continue
             if sims is not None:
                 targets = backend.targets_for(sims[i][:n_before], j, objects, thr)
             else:
                 targets = {backend.ensure_node(objects[j]): 1.0}
+                touched.add(j)
             backend.route_detection(det, targets)
             objects[j] = geo_merge_ali(objects[j], det, downsample_voxel_size, dbscan_remove_noise, dbscan_eps,
                                        dbscan_min_points, spatial_sim_type, device, False)
-        tracker = helper("tracker")
-        if tracker is not None:
-            try:
-                tracker.increment_total_merges(len(match_indices) - match_indices.count(None))
-            except Exception:  # logging only  # noqa: BLE001
-                pass
-        sync_labels(objects)
+        if tracker is not None:  # ConceptGraphs' MappingTracker counters, updated as the original does
+            _log_only(lambda: tracker.increment_total_merges(len(match_indices) - match_indices.count(None)))
+            _log_only(lambda: tracker.increment_total_objects(len(objects) - count_before))
+        sync_labels(objects, touched)
         backend.end_frame()
         return objects
 

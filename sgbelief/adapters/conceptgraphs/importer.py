@@ -18,6 +18,7 @@ class ImportSummary:
     n_objects: int
     n_detections: int
     n_events: int
+    n_unknown: int = 0  #: objects left unknown (nothing commits)
     labels: dict[str, dict[str, Any]] = field(default_factory=dict)  # node -> {majority, belief, ...}
 
 
@@ -62,6 +63,9 @@ def import_result(results: Any, backend: Any, *, path: Any = None) -> ImportSumm
         for k, claim in enumerate(backend.claims_of(obj)):
             single = {"class_id": [claim.class_id], "class_name": [claim.class_name],
                       "conf": [claim.confidence], "image_idx": [claim.t]}
+            for key in ("pcd", "pcd_np"):  # a point-cloud channel labels every claim from the object's points
+                if obj.get(key) is not None:
+                    single[key] = obj[key]
             claims.append((claim.t, order, k, node, single))
     claims.sort(key=lambda c: (c[0], c[1], c[2]))
     n_events = 0
@@ -80,6 +84,7 @@ def import_result(results: Any, backend: Any, *, path: Any = None) -> ImportSumm
             "num_detections": len(ids),
         }
         backend.graph.nx.nodes[node]["label"] = summary.labels[node]["belief"]
+        summary.n_unknown += int(hit is None)
     return summary
 
 

@@ -65,6 +65,9 @@ class ClassVocabulary:
             raise ConfigError(f"{path}: top level must be a mapping")
         if data.get("format") == "sgbelief.vocabulary":  # a subsumption table used directly
             return cls(aliases=_aliases_of(data, path), subsumption_path=path)
+        if data.get("format") == "sgbelief.label_mapping":
+            raise ConfigError(f"{path}: key 'format': a label mapping is not a class vocabulary; pass it as "
+                              "mapping= (or the 'mapping' key of a sgbelief.cg_vocabulary file)")
         if data.get("format") not in (None, "sgbelief.cg_vocabulary"):
             raise ConfigError(f"{path}: key 'format': expected 'sgbelief.cg_vocabulary', got {data.get('format')!r}")
         classes = data.get("classes") or {}
@@ -73,6 +76,25 @@ class ClassVocabulary:
         ignore = data.get("ignore") or []
         if not isinstance(ignore, list):
             raise ConfigError(f"{path}: key 'ignore': expected a list of class names")
+        if data.get("class_list") is not None:  # open vocabulary: derive the table
+            unknown = sorted(set(data) - {"format", "version", "class_list", "taxonomy", "mapping", "classes", "ignore"})
+            if unknown:
+                raise ConfigError(f"{path}: key {unknown[0]!r}: not allowed with 'class_list'")
+            if data.get("subsumption") is not None:
+                raise ConfigError(f"{path}: key 'subsumption': give either 'subsumption' or 'class_list', not both")
+
+            def local(key: str) -> Any:
+                value = data.get(key)
+                if value is None or not isinstance(value, str):
+                    return value
+                cand = path.parent / value
+                return cand if cand.exists() else value
+
+            try:
+                return cls.open_vocabulary(local("class_list"), taxonomy=local("taxonomy") or "indoor",
+                                           mapping=local("mapping"), ignore=ignore, classes=classes)
+            except FileNotFoundError as exc:
+                raise ConfigError(f"{path}: {exc}") from exc
         aliases: dict[str, str] = {}
         sub_path: Path | None = None
         sub = data.get("subsumption")
@@ -86,6 +108,20 @@ class ClassVocabulary:
             sub_data = yaml.safe_load(sub_path.read_text()) or {}
             aliases = _aliases_of(sub_data, sub_path)
         return cls(classes, aliases=aliases, ignore=ignore, subsumption_path=sub_path)
+
+    @classmethod
+    def open_vocabulary(cls, class_list: Any, *, taxonomy: Any = "indoor", mapping: Any = None,
+                        ignore: Iterable[str] = ("wall", "floor", "ceiling"),
+                        classes: Mapping[str, str] | None = None) -> ClassVocabulary:
+        """A vocabulary derived from a detector class list (a path, a shipped name such as
+        ``scannet200`` / ``coco80``, or a list of names), a taxonomy and an optional mapping into the
+        geometric channel's labels (e.g. ``scannet200_nyu40``). See :mod:`sgbelief.fusion.open_vocab`."""
+        from sgbelief.fusion.compatibility import SubsumptionTable
+
+        ignore = list(ignore)
+        table = SubsumptionTable.from_class_list(class_list, taxonomy, mapping, ignore=ignore)
+        aliases = {alias: pred for pred, spec in table.specs.items() for alias in spec.aliases}
+        return cls(classes, aliases=aliases, ignore=ignore, table=table)
 
     @classmethod
     def default(cls) -> ClassVocabulary:

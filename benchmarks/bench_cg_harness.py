@@ -1,0 +1,67 @@
+"""ConceptGraphs' own mapping loop on a synthetic RGB-D room, with and without the sgbelief backend.
+
+    SGBELIEF_CONCEPTGRAPH_PATH=/path/to/concept-graphs python benchmarks/bench_cg_harness.py \\
+        [--operator comod] [--operator-config benchmarks/cg_uniform.yaml] [--channels oracle,segmenter,none]
+
+The checkout (branch main or ali-dev) is never copied or modified; the environment needs the mapping
+code's imports (torch, open3d, faiss, cv2, omegaconf, pandas; ali-dev also supervision and openai).
+Prints label accuracy, mIoU and the fusion step's ms/frame (ConceptGraphs' similarities + merge, with
+the backend installed or not) per run; ``--json`` writes them. See benchmarks/cg_harness.py.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import numpy as np  # noqa: E402
+
+import cg_harness as H  # noqa: E402
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cg", default=os.environ.get(H.ENV), help=f"concept-graphs checkout (default ${H.ENV})")
+    ap.add_argument("--operator", default="comod")
+    ap.add_argument("--operator-config", default=None, help="operator config YAML (default: today's default)")
+    ap.add_argument("--channels", default="oracle,segmenter,none")
+    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--seed", type=int, default=3)
+    ap.add_argument("--json", default=None, help="write the results here")
+    args = ap.parse_args(argv)
+    if not args.cg:
+        ap.error(f"pass --cg or set {H.ENV}")
+    world = H.render_world(n_frames=args.frames)
+    cg = H.import_conceptgraph(args.cg)
+    gen = cg[3]
+    out = {"branch": gen, "path": args.cg, "operator": args.operator, "operator_config": args.operator_config,
+           "frames": args.frames, "runs": []}
+    t0 = time.perf_counter()
+    vote = H.run(world, cg, args.cg, seed=args.seed)
+    print(f"[{gen}] ConceptGraphs vote            acc {vote.accuracy:.3f}  mIoU {vote.miou:.3f}  "
+          f"objects {vote.n_objects}  fusion {np.mean(vote.fusion_ms):.1f} ms/frame  ({time.perf_counter() - t0:.0f} s)")
+    out["runs"].append({"channel": None, "operator": "conceptgraphs-vote", "accuracy": vote.accuracy,
+                        "miou": vote.miou, "objects": vote.n_objects, "fusion_ms": float(np.mean(vote.fusion_ms))})
+    for ch in [c for c in args.channels.split(",") if c]:
+        t0 = time.perf_counter()
+        backend = H.make_backend(args.operator, H.make_channel(world, ch), operator_config=args.operator_config)
+        r = H.run(world, cg, args.cg, backend=backend, seed=args.seed)
+        s = r.summary
+        print(f"[{gen}] {args.operator:<8} channel={ch:<9} acc {r.accuracy:.3f}  mIoU {r.miou:.3f}  "
+              f"objects {r.n_objects}  unknown {s.unknown}  fusion {np.mean(r.fusion_ms):.1f} ms/frame  "
+              f"({time.perf_counter() - t0:.0f} s)")
+        out["runs"].append({"channel": ch, "operator": args.operator, "accuracy": r.accuracy, "miou": r.miou,
+                            "objects": r.n_objects, "unknown": s.unknown, "fusion_ms": float(np.mean(r.fusion_ms))})
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
