@@ -77,6 +77,8 @@ def load_query_set(path: str | Path) -> QuerySet:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
         raise FormatError(f"invalid YAML: {exc}", path=path) from None
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text (byte offset {exc.start})", path=path) from None
     if not isinstance(doc, Mapping) or doc.get("format") != "sgbelief.queries":
         raise FormatError("field 'format': expected 'sgbelief.queries'", path=path)
     if doc.get("version") != 1:
