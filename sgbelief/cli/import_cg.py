@@ -22,6 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from sgbelief.adapters.conceptgraphs.backend import ConceptGraphsBackend
     from sgbelief.adapters.conceptgraphs.importer import import_file
+    from sgbelief.graph.persistence import atomic_write_text
 
     backend = ConceptGraphsBackend(args.operator, vocabulary=args.vocab, context=args.context,
                                    operator_config=args.operator_config)
@@ -29,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     graph_path = backend.graph.save(out / f"graph.{args.graph_format}")
-    (out / "labels.json").write_text(json.dumps(summary.labels, indent=2, default=str))
+    atomic_write_text(out / "labels.json", json.dumps(summary.labels, indent=2, default=str))
     changed = sum(1 for v in summary.labels.values() if v["belief"] != v["majority"])
     print(f"imported {summary.n_objects} objects, {summary.n_detections} detections, "
           f"{summary.n_events} evidence events ({args.operator})")

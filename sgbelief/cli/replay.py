@@ -38,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from sgbelief.errors import ConfigError
     from sgbelief.eval.formats import ReadStats, iter_events, read_truth
-    from sgbelief.eval.replay import format_table, make_runs, replay, score_run
+    from sgbelief.eval.replay import format_table, make_runs, replay, require_events, score_run
     from sgbelief.fusion.config import OperatorConfig
     from sgbelief.graph.persistence import atomic_write_text
 
@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if progress is not None:
             progress.close()
+    require_events(stats, args.events)  # an empty log: an error, and no saved graph overwritten
     preds = [p for p in vocab.predicates if any(p in row for row in truth.values())]
     preds += sorted({p for row in truth.values() for p in row} - set(preds))
     scores = {r.name: score_run(r, truth, preds, tau=args.tau) for r in runs}
