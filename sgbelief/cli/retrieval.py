@@ -31,7 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--operator-config", metavar="YAML", default=None, help="operator configuration file")
     parser.add_argument("--channel", choices=("scannet", "recorded"), default="scannet",
                         help="ScanNet geometric channel: mesh labels (default) or the events' recorded labels")
-    parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold P >= tau (default 0.5)")
+    parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold: retrieved when P > tau, strictly (default: %(default)s)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     parser.add_argument("--out", metavar="FILE", default=None, help="also write the scores as JSON to FILE")
     parser.add_argument("--workers", type=int, default=1,
