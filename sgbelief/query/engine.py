@@ -400,5 +400,21 @@ def run_query(graph: Any, expr: str | Compound, tau: float = 0.5, registry: Rela
             name, expr = nq.name, nq.compound
             if config is None:
                 config = nq.config
+        else:
+            _check_not_a_mistyped_name(expr)
     engine = QueryEngine(graph, registry=registry, config=config, tau=tau, require_evidence=require_evidence)
     return engine.evaluate(expr, include_all=include_all, limit=limit, name=name)
+
+
+def _check_not_a_mistyped_name(expr: str) -> None:
+    """Words with no operator that do not parse ("car near unicorn") were meant as a named query:
+    say there is no such query and suggest the closest ones, instead of a syntax error."""
+    from sgbelief.query.language import QuerySyntaxError
+    from sgbelief.query.named import UnknownNamedQueryError, suggest_named_queries
+
+    if any(ch in expr for ch in "&|!()~") or len(expr.split()) < 2:
+        return
+    try:
+        parse(expr)
+    except QuerySyntaxError:
+        raise UnknownNamedQueryError(expr.strip(), suggest_named_queries(expr)) from None
