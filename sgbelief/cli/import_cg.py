@@ -12,9 +12,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--operator", default="comod", help="fusion operator (default: comod)")
     parser.add_argument("--vocab", default=None,
                         help="class-name vocabulary YAML (default: configs/conceptgraphs/scannet.yaml)")
-    parser.add_argument("--context", default="conceptgraphs", help="context tag kappa of the events")
-    parser.add_argument("--operator-config", default=None, help="operator config YAML")
-    parser.add_argument("--out", default="results/import-cg", help="output directory (graph.json, labels.json)")
+    parser.add_argument("--context", default="conceptgraphs", help="context tag kappa of the events (default: %(default)s)")
+    parser.add_argument("--operator-config", default=None, help="operator config YAML (default: configs/operators/default.yaml)")
+    parser.add_argument("--out", default="results/import-cg", help="output directory for graph.json (or graph.npz) and labels.json (default: %(default)s)")
     parser.add_argument("--graph-format", choices=["json", "npz"], default="json",
                         help="save the graph as graph.json (default) or graph.npz (binary layout for large maps)")
 

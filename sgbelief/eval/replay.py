@@ -125,7 +125,7 @@ def replay(
 
     ``engine``: ``streaming`` (event by event, records read incrementally), ``batched`` (the
     majority / naive_bayes / overwrite runs go through :func:`sgbelief.eval.batched.batched_replay`,
-    bit-identical and ~20x faster; the other runs stream; records are held in memory; event times
+    bit-identical and faster (README's performance table has the measured figures); the other runs stream; records are held in memory; event times
     must not decrease) or ``auto`` (batched when the stream allows it, streaming otherwise).
     """
     if engine not in ENGINES:
