@@ -81,7 +81,8 @@ BAD_CASES = [
 @pytest.mark.parametrize("obj,field", BAD_CASES)
 def test_bad_line_names_line_and_field(tmp_path, obj, field):
     p = tmp_path / "e.jsonl"
-    lines = [{"format": "sgbelief.events", "version": 1}, GOOD, GOOD, obj, GOOD]
+    lines = [{"format": "sgbelief.events", "version": 1}, {**GOOD, "id": "g1"}, {**GOOD, "id": "g2"}, obj,
+             {**GOOD, "id": "g3"}]  # ids are unique within a log
     p.write_text("".join(json.dumps(o) + "\n" for o in lines))  # json.dumps writes NaN literally
     with pytest.raises(FormatError) as ei:
         list(iter_events(p))
@@ -92,7 +93,7 @@ def test_bad_line_names_line_and_field(tmp_path, obj, field):
 
 def test_bad_json_and_skip(tmp_path):
     p = tmp_path / "e.jsonl"
-    _write_lines(p, [GOOD, '{"t": 1, "targets":', "", GOOD, "[1, 2]", {**GOOD, "confidence": -1}])
+    _write_lines(p, [GOOD, '{"t": 1, "targets":', "", {**GOOD, "id": "e2"}, "[1, 2]", {**GOOD, "confidence": -1}])
     with pytest.raises(FormatError, match=r":2: bad JSON"):
         list(iter_events(p))
     st_ = ReadStats()

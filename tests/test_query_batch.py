@@ -96,11 +96,11 @@ def reference_score(engine: QueryEngine, node, compound: Compound, kinds, prune:
                 f = 0.0 if v is None else float(v != lit.negated)
                 comps.append(Component(lit.name, GEOMETRIC, lit.negated, v, f))
             prob *= f
-            if prune and prob < tau:
+            if prune and prob <= tau:
                 return None
     order = {lit.name: i for i, lit in enumerate(compound.literals)}
     comps.sort(key=lambda c: order[c.name])
-    return Match(node, prob, tuple(comps), prob >= tau)
+    return Match(node, prob, tuple(comps), prob > tau)
 
 
 literal = st.tuples(st.sampled_from(BELIEFS + GEOMETRIC), st.booleans())

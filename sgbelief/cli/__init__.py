@@ -55,13 +55,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     from sgbelief.errors import SgbeliefError
 
     try:
-        return int(module.run(args) or 0)
+        rc = int(module.run(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit flush
+        return rc
+    except BrokenPipeError:
+        # the reader went away (``sgbelief query MAP is_car | head -2``): stop quietly, as a SIGPIPE'd tool does
+        _silence_stdout()
+        return 141
     except SgbeliefError as exc:
         print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
         return 1
     except FileNotFoundError as exc:
         print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
         return 1
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush does not raise again."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # stdout replaced (tests) or already closed
+        pass
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,23 +10,34 @@ from sgbelief.fusion.registry import OPERATOR_NAMES
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--suite", choices=["outdoor", "indoor", "all"], default="all")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", type=Path, default=Path("results/bench"), help="output directory (results.json, results.md, PNGs)")
-    p.add_argument("--operators", default=",".join(OPERATOR_NAMES))
-    p.add_argument("--config", type=Path, default=None, help="operator config YAML")
+    p.add_argument("--suite", choices=["outdoor", "indoor", "all"], default="all",
+                   help="simulated suite(s) to run: outdoor (KITTI-360-like), indoor (ScanNet-like) or all "
+                        "(default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the simulated suites (default: %(default)s)")
+    p.add_argument("--out", type=Path, default=Path("results/bench"),
+                   help="output directory (default: %(default)s): results.json, results.md, the figures (PNG), and "
+                        "the reusable evidence logs data/<suite>/events.jsonl, truth.json, nodes.json (input for "
+                        "'sgbelief replay' and 'sgbelief retrieval --suite')")
+    p.add_argument("--operators", default=",".join(OPERATOR_NAMES),
+                   help="comma-separated fusion operators (default: %(default)s)")
+    p.add_argument("--config", type=Path, default=None,
+                   help="operator config YAML (default: configs/operators/default.yaml)")
     p.add_argument("--fm-source", choices=["parametric", "detector_records"], default=None,
-                   help="draw the foundation-model channel's (score, correct) pairs from real detector records")
-    p.add_argument("--scale", type=float, default=None, help="scale the suites' size (e.g. 4 for a bigger run)")
-    p.add_argument("--no-retrieval", action="store_true", help="skip the compound-query retrieval table")
-    p.add_argument("--no-real", action="store_true", help="skip the real detector-confidence calibration report")
-    p.add_argument("--quiet", action="store_true")
-    p.add_argument("--workers", type=int, default=1, help="run the suites in parallel processes")
-    p.add_argument("--executor", choices=["local", "ray"], default="local", help="local process pool or a Ray cluster")
+                   help="draw the foundation-model channel's (score, correct) pairs from real detector records "
+                        "(default: the suite config's choice, parametric)")
+    p.add_argument("--scale", type=float, default=None,
+                   help="scale the suites' size (e.g. 4 for a bigger run; default: 1, the paper's size)")
+    p.add_argument("--no-retrieval", action="store_true", help="skip the compound-query retrieval table (default: run it)")
+    p.add_argument("--no-real", action="store_true",
+                   help="skip the real detector-confidence calibration report (default: run it)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar on stderr (default: show it)")
+    p.add_argument("--workers", type=int, default=1, help="run the suites in parallel processes (default: %(default)s)")
+    p.add_argument("--executor", choices=["local", "ray"], default="local",
+                   help="local process pool or a Ray cluster (default: %(default)s)")
     p.add_argument("--grid", action="store_true",
                    help="run the robustness grid instead: suite x profile {vlm_a, vlm_b} x confidence source "
                         "{parametric, rfcn, ssd} x channel {oracle, segmenter}, every operator, over --seeds; "
-                        "writes grid.md and grid.json")
+                        "writes grid.md and grid.json (default: off)")
     p.add_argument("--seeds", default="100-104",
                    help="with --grid: seeds as a list or range, e.g. 0-2 (development) or 100-104 (held out, the default)")
 

@@ -12,12 +12,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--operator", default="comod", help="fusion operator (default: comod)")
     parser.add_argument("--vocab", default=None,
                         help="class-name vocabulary YAML (default: configs/conceptgraphs/scannet.yaml)")
-    parser.add_argument("--context", default="conceptgraphs", help="context tag kappa of the events")
-    parser.add_argument("--operator-config", default=None, help="operator config YAML")
-    parser.add_argument("--out", default="results/import-cg", help="output directory (graph.json, labels.json)")
+    parser.add_argument("--context", default="conceptgraphs", help="context tag kappa of the events (default: %(default)s)")
+    parser.add_argument("--operator-config", default=None, help="operator config YAML (default: configs/operators/default.yaml)")
+    parser.add_argument("--out", default="results/import-cg", help="output directory for graph.json (or graph.npz) and labels.json (default: %(default)s)")
     parser.add_argument("--channel", default=None, metavar="SCENE_DIR",
                         help="geometric channel: ScanNet mesh labels (NYU40) of this ScanNet scene folder, "
-                             "read at each object's points")
+                             "read at each object's points (default: no channel)")
     parser.add_argument("--first-pose", default=None,
                         help="with --channel: the pose file of the map's frame 0 (default SCENE_DIR/pose/0.txt "
                              "if present; 'none': the map is in the mesh frame)")
@@ -28,6 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from sgbelief.adapters.conceptgraphs.backend import ConceptGraphsBackend
     from sgbelief.adapters.conceptgraphs.importer import import_file
+    from sgbelief.graph.persistence import atomic_write_text
 
     channel = None
     if args.channel is not None:
@@ -41,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     graph_path = backend.graph.save(out / f"graph.{args.graph_format}")
-    (out / "labels.json").write_text(json.dumps(summary.labels, indent=2, default=str))
+    atomic_write_text(out / "labels.json", json.dumps(summary.labels, indent=2, default=str))
     changed = sum(1 for v in summary.labels.values() if v["belief"] != v["majority"])
     print(f"imported {summary.n_objects} objects, {summary.n_detections} detections, "
           f"{summary.n_events} evidence events ({args.operator})")

@@ -11,8 +11,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("map_dir", type=Path,
                    help="saved graph: a directory holding graph.json or graph.npz, or the .json / .npz file")
     p.add_argument("node", nargs="?", default=None, help="show one node's beliefs and full provenance")
-    p.add_argument("--predicate", default=None, help="only this predicate")
-    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.add_argument("--predicate", default=None, help="only this predicate (default: all)")
+    p.add_argument("--json", action="store_true", help="machine-readable output (default: a text summary)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -13,14 +13,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("query", metavar="EXPR_OR_NAME",
                         help='e.g. "is_chair & is_near_window & !is_on_top_of", or a named query '
                              '("chair near window", chair_near_window; see configs/queries/)')
-    parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold: P >= tau (default 0.5)")
-    parser.add_argument("--json", action="store_true", help="print the result as JSON")
-    parser.add_argument("--top", type=int, default=None, metavar="K", help="show only the K best results")
+    parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold: a node is retrieved when P > tau, strictly (the commit rule of "
+                             "inspect and committed()); default: %(default)s")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON (default: a table)")
+    parser.add_argument("--top", type=int, default=None, metavar="K",
+                        help="list only the K best results (the header and n_retrieved still count all; default: all)")
     parser.add_argument("--all", action="store_true",
-                        help="also list candidates below tau (fully scored, no pruning)")
-    parser.add_argument("--explain", action="store_true", help="print the per-component breakdown of each result")
+                        help="also list candidates at or below tau (fully scored, no pruning; they are listed, not "
+                             "counted as retrieved; default: only the retrieved)")
+    parser.add_argument("--explain", action="store_true", help="print the per-component breakdown of each result (default: off)")
     parser.add_argument("--no-require-evidence", action="store_true",
-                        help="also score nodes with no evidence on the query's belief predicates (prior 0.5)")
+                        help="also score nodes with no evidence on the query's belief predicates (prior 0.5; "
+                             "default: only nodes with evidence)")
 
 
 def run(args: argparse.Namespace) -> int:

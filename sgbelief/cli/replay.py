@@ -15,30 +15,36 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="events.jsonl evidence log; several logs = several scenes (unique node ids), pooled")
     p.add_argument("--truth", type=Path, required=True, help="truth.json {node: {predicate: 0|1}}")
     p.add_argument("--vocab", required=True, help="vocabulary YAML (subsumption table) or a shipped name: scannet, kitti360")
-    p.add_argument("--operators", default=",".join(OPERATOR_NAMES), help="comma-separated operator names")
+    p.add_argument("--operators", default=",".join(OPERATOR_NAMES), help="comma-separated operator names (default: %(default)s)")
     p.add_argument("--config", type=Path, default=None, help="operator config YAML (default: configs/operators/default.yaml)")
-    p.add_argument("--json", type=Path, default=None, dest="json_out", help="write metrics per operator as JSON")
-    p.add_argument("--save-graph", type=Path, default=None, help="save each operator's final graph under DIR/<operator>/")
+    p.add_argument("--json", type=Path, default=None, dest="json_out", help="write metrics per operator as JSON (default: none)")
+    p.add_argument("--save-graph", type=Path, default=None, help="save each operator's final graph under DIR/<operator>/ (default: not saved)")
     p.add_argument("--graph-format", choices=["json", "npz"], default="json",
                    help="format of the saved graphs: json (graph.json, default) or npz (graph.npz, the binary layout "
                         "for large maps)")
-    p.add_argument("--skip-bad-lines", action="store_true", help="skip (and count) malformed lines instead of stopping")
-    p.add_argument("--tau", type=float, default=0.5, help="commit threshold for the metrics")
-    p.add_argument("--allow-unknown-predicates", action="store_true", help="accept predicates the vocabulary does not define")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--skip-bad-lines", action="store_true",
+                   help="skip (and count) malformed lines instead of stopping (default: stop at the first)")
+    p.add_argument("--tau", type=float, default=0.5,
+                   help="commit threshold for the metrics: committed when P > tau (default: %(default)s)")
+    p.add_argument("--allow-unknown-predicates", action="store_true", help="accept predicates the vocabulary does not define (default: an error)")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (default: a bar on stderr when it is a terminal)")
     p.add_argument("--engine", choices=["streaming", "batched", "auto"], default="streaming",
                    help="streaming (event by event, the log read incrementally), batched (majority, naive_bayes and "
-                        "overwrite through the vectorised engine: same maps bit for bit, ~20x faster, the log held in "
-                        "memory, times must not decrease; other operators stream) or auto (batched when possible)")
-    p.add_argument("--workers", type=int, default=1, help="replay several scenes in parallel processes")
+                        "overwrite through the vectorised engine: same maps bit for bit, several times faster (measured "
+                        "figures and their commands: README, performance table), the log held in memory, times must not decrease; other operators stream) or auto (batched when possible); "
+                        "default: %(default)s")
+    p.add_argument("--workers", type=int, default=1,
+                   help="replay several scenes in parallel processes (default: %(default)s)")
     p.add_argument("--executor", choices=["local", "ray"], default="local",
-                   help="local process pool, or a Ray cluster (pip install 'sgbelief[ray]'; RAY_ADDRESS)")
+                   help="local process pool, or a Ray cluster (pip install 'sgbelief[ray]'; RAY_ADDRESS; "
+                        "default: %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
     from sgbelief.errors import ConfigError
     from sgbelief.eval.formats import ReadStats, iter_events, read_truth
-    from sgbelief.eval.replay import format_table, make_runs, replay, score_run
+    from sgbelief.eval.replay import format_table, make_runs, replay, require_events, score_run
     from sgbelief.fusion.config import OperatorConfig
     from sgbelief.graph.persistence import atomic_write_text
 
@@ -66,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if progress is not None:
             progress.close()
+    require_events(stats, args.events)  # an empty log: an error, and no saved graph overwritten
     preds = [p for p in vocab.predicates if any(p in row for row in truth.values())]
     preds += sorted({p for row in truth.values() for p in row} - set(preds))
     scores = {r.name: score_run(r, truth, preds, tau=args.tau) for r in runs}

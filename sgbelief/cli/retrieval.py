@@ -15,10 +15,11 @@ from pathlib import Path
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     src = parser.add_argument_group("source (one of)")
-    src.add_argument("--scenes", metavar="DIR", help="ScanNet v2 scene folders (or one scene folder)")
+    src.add_argument("--scenes", metavar="DIR", help="ScanNet v2 scene folders (or one scene folder); no default")
     src.add_argument("--suite", metavar="DIR", action="append", default=[],
-                     help="simulated suite folder with nodes.json, events.jsonl, truth.json (repeatable)")
-    parser.add_argument("--events", metavar="EVENTS.jsonl", help="event log replayed over the ScanNet scenes")
+                     help="simulated suite folder with nodes.json, events.jsonl, truth.json (repeatable; e.g. "
+                          "results/bench/data/outdoor written by 'sgbelief bench'); no default")
+    parser.add_argument("--events", metavar="EVENTS.jsonl", help="event log replayed over the ScanNet scenes (required with --scenes; no default)")
     parser.add_argument("--vocab", metavar="VOCAB", default=None,
                         help="vocabulary YAML or shipped name (scannet | kitti360); default: scannet for --scenes and indoor "
                              "suites, kitti360 for outdoor suites")
@@ -28,16 +29,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="named-query set: scannet | kitti360 | a YAML file (default: the vocabulary's)")
     parser.add_argument("--operators", default="overwrite,majority,naive_bayes,refined,cal,comod",
                         help="comma-separated operator names (default: all six)")
-    parser.add_argument("--operator-config", metavar="YAML", default=None, help="operator configuration file")
+    parser.add_argument("--operator-config", metavar="YAML", default=None, help="operator configuration file (default: configs/operators/default.yaml)")
     parser.add_argument("--channel", choices=("scannet", "recorded"), default="scannet",
                         help="ScanNet geometric channel: mesh labels (default) or the events' recorded labels")
-    parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold P >= tau (default 0.5)")
-    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    parser.add_argument("--out", metavar="FILE", default=None, help="also write the scores as JSON to FILE")
+    parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold: retrieved when P > tau, strictly (default: %(default)s)")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of a table (default: a table)")
+    parser.add_argument("--out", metavar="FILE", default=None, help="also write the scores as JSON to FILE (default: none)")
     parser.add_argument("--workers", type=int, default=1,
-                        help="evaluate the (source, operator) cells in parallel processes (same output as serial)")
+                        help="evaluate the (source, operator) cells in parallel processes (same output as serial; "
+                             "default: %(default)s)")
     parser.add_argument("--executor", choices=["local", "ray"], default="local",
-                        help="local process pool, or a Ray cluster (pip install 'sgbelief[ray]'; RAY_ADDRESS)")
+                        help="local process pool, or a Ray cluster (pip install 'sgbelief[ray]'; RAY_ADDRESS; "
+                             "default: %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -345,21 +345,35 @@ def iter_events(
     """Stream validated events from an ``events.jsonl`` file, one line at a time.
 
     A malformed line raises :class:`FormatError` (file, 1-based line number, field) unless
-    ``skip_bad_lines`` is set, in which case it is counted in ``stats.skipped``.  Blank lines are
+    ``skip_bad_lines`` is set, in which case it is counted in ``stats.skipped``.  A line that is not
+    UTF-8 is such a malformed line, and so is an event whose ``id`` an earlier line of the file
+    already used (ids are unique within a log: ``retract(id)`` must name one claim).  Blank lines are
     ignored; an optional header object may only appear as the first non-blank line.
     """
     st = stats if stats is not None else ReadStats()
     loads = json.loads
     first = True
-    with open(path, encoding="utf-8") as fh:
-        for lineno, raw in enumerate(fh, start=1):
+    seen_ids: set[str] = set()
+    # read bytes and decode line by line: a non-UTF-8 byte is a bad line (named), not a crash
+    with open(path, "rb") as fh:
+        for lineno, braw in enumerate(fh, start=1):
             st.lines += 1
-            if not raw.strip():
+            if not braw.strip():
                 continue
             try:
+                raw = braw.decode("utf-8")
                 obj = loads(raw)
-            except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-                err = FormatError(f"bad JSON: {exc.msg} (column {exc.colno})", path=path, line=lineno)
+            except UnicodeDecodeError as exc:
+                err = FormatError(f"not UTF-8 text: byte 0x{braw[exc.start]:02x} at column {exc.start + 1}",
+                                  path=path, line=lineno)
+                if not skip_bad_lines:
+                    raise err from None
+                _skip(st, err)
+                first = False
+                continue
+            except (json.JSONDecodeError, RecursionError) as exc:
+                msg = f"{exc.msg} (column {exc.colno})" if isinstance(exc, json.JSONDecodeError) else "nested too deeply"
+                err = FormatError(f"bad JSON: {msg}", path=path, line=lineno)
                 if not skip_bad_lines:
                     raise err from None
                 _skip(st, err)
@@ -379,6 +393,16 @@ def iter_events(
                     raise err from None
                 _skip(st, err)
                 continue
+            eid = rec.id
+            if eid is not None:
+                if eid in seen_ids:
+                    err = FormatError(f"field 'id': duplicate event id {eid!r} (ids must be unique within a log)",
+                                      path=path, line=lineno)
+                    if not skip_bad_lines:
+                        raise err from None
+                    _skip(st, err)
+                    continue
+                seen_ids.add(eid)
             st.events += 1
             yield rec
 
@@ -441,6 +465,10 @@ def _load_json(path: str | os.PathLike[str]) -> Any:
             return json.load(fh)
     except json.JSONDecodeError as exc:
         raise FormatError(f"bad JSON: {exc.msg} (column {exc.colno})", path=path, line=exc.lineno) from None
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text (byte offset {exc.start})", path=path) from None
+    except RecursionError:
+        raise FormatError("bad JSON: nested too deeply", path=path) from None
 
 
 def read_truth(path: str | os.PathLike[str]) -> dict[str, dict[str, int]]:

@@ -125,7 +125,7 @@ def replay(
 
     ``engine``: ``streaming`` (event by event, records read incrementally), ``batched`` (the
     majority / naive_bayes / overwrite runs go through :func:`sgbelief.eval.batched.batched_replay`,
-    bit-identical and ~20x faster; the other runs stream; records are held in memory; event times
+    bit-identical and faster (README's performance table has the measured figures); the other runs stream; records are held in memory; event times
     must not decrease) or ``auto`` (batched when the stream allows it, streaming otherwise).
     """
     if engine not in ENGINES:
@@ -238,6 +238,14 @@ def _waves(recs: list[EventRecord], lines: list[int], runs: Sequence[OperatorRun
         run.operator.stats.update(stats)
 
 
+def require_events(stats: ReadStats, source: object) -> None:
+    """An evidence log that yielded no event is an error (nothing to score, nothing worth saving
+    over an existing map): raise :class:`FormatError` naming the file."""
+    if stats.events == 0:
+        why = f"all {stats.skipped} event lines were malformed and skipped" if stats.skipped else "the log is empty"
+        raise FormatError(f"no evidence events to replay ({why}; {stats.lines} lines read)", path=source)
+
+
 def replay_file(
     events: str | Path,
     operators: Sequence[str | FusionOperator] = OPERATOR_NAMES,
@@ -339,6 +347,7 @@ def replay_scene(job: SceneJob) -> SceneResult:
     runs = make_runs(list(job.operators), vocab, config, strict=job.strict)
     replay(iter_events(job.events, skip_bad_lines=job.skip_bad_lines, stats=stats), runs, line_of=stats, source=job.events,
            engine=job.engine)
+    require_events(stats, job.events)  # before any graph is saved
     probs: dict[str, dict[str, dict[str, float]]] = {}
     pairs: dict[str, list[tuple[str, str]]] = {}
     for r in runs:

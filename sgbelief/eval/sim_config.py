@@ -25,7 +25,7 @@ __all__ = [
 
 
 class _M(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class ClassSpec(_M):
@@ -210,9 +210,21 @@ def load_vocabulary(name_or_path: str) -> dict[str, Any]:
         p = config_dir() / "vocab" / f"{name_or_path}.yaml"
     try:
         with open(p, encoding="utf-8") as fh:
-            return yaml.safe_load(fh)
+            doc = yaml.safe_load(fh)
     except FileNotFoundError:
         raise ConfigError(f"vocabulary {name_or_path!r} not found ({p})") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{p}: not UTF-8 text (byte offset {exc.start})") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: bad YAML: {exc}") from None
+    if not isinstance(doc, dict):
+        raise ConfigError(f"{p}: a vocabulary must be a YAML mapping")
+    if doc.get("format", "sgbelief.vocabulary") != "sgbelief.vocabulary":
+        raise ConfigError(f"{p}: key 'format': expected 'sgbelief.vocabulary', got {doc['format']!r}")
+    version = doc.get("version", 1)
+    if type(version) is not int or version != 1:
+        raise ConfigError(f"{p}: key 'version': unsupported version {version!r} (this sgbelief reads 1)")
+    return doc
 
 
 def _check_labels(cfg: SimConfig, vocab: dict[str, Any]) -> None:
@@ -258,6 +270,8 @@ def load_sim_config(name_or_path: str | os.PathLike[str], **overrides: Any) -> S
         raise ConfigError(f"simulation config {str(name_or_path)!r} not found ({p})") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: bad YAML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{p}: not UTF-8 text (byte offset {exc.start})") from None
     if not isinstance(raw, dict):
         raise ConfigError(f"{p}: top level must be a mapping")
     raw.update({k: v for k, v in overrides.items() if v is not None})
@@ -266,6 +280,6 @@ def load_sim_config(name_or_path: str | os.PathLike[str], **overrides: Any) -> S
     except ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
-        raise ConfigError(f"{p}: key '{loc}': {err['msg']}") from None
+        raise ConfigError(f"{p}: key '{loc}': {err['msg'].removeprefix('Value error, ')}") from None
     _check_labels(cfg, load_vocabulary(cfg.vocabulary))
     return cfg

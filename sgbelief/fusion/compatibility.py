@@ -6,7 +6,7 @@ import re
 from collections.abc import Iterable, Mapping
 from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -31,6 +31,10 @@ def normalise_class_name(name: str) -> str:
     return re.sub(r"[^0-9a-z]+", "_", name.strip().lower()).strip("_")
 
 
+VOCABULARY_FORMAT = "sgbelief.vocabulary"
+VOCABULARY_VERSION = 1
+
+
 class PredicateSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     positive: list[str] = Field(default_factory=list)
@@ -49,11 +53,18 @@ class PredicateSpec(BaseModel):
 
 class VocabularyFile(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    format: str = "sgbelief.vocabulary"
-    version: int = 1
+    format: Literal["sgbelief.vocabulary"] = VOCABULARY_FORMAT
+    version: int = Field(VOCABULARY_VERSION, strict=True)
     name: str = "vocabulary"
     labels: list[str] | None = None
     predicates: dict[str, PredicateSpec]
+
+    @field_validator("version")
+    @classmethod
+    def _version(cls, v: int) -> int:
+        if v != VOCABULARY_VERSION:
+            raise ValueError(f"unsupported version {v} (this sgbelief reads version {VOCABULARY_VERSION})")
+        return v
 
     @field_validator("predicates")
     @classmethod
@@ -128,6 +139,8 @@ class SubsumptionTable:
             mark = getattr(exc, "problem_mark", None)
             line = mark.line + 1 if mark is not None else None
             raise FormatError(f"malformed YAML: {getattr(exc, 'problem', exc)}", path=p, line=line) from exc
+        except UnicodeDecodeError as exc:
+            raise FormatError(f"not UTF-8 text (byte offset {exc.start})", path=p) from None
         if not isinstance(raw, dict):
             raise FormatError("a vocabulary file must be a YAML mapping with a 'predicates' key", path=p)
         try:
@@ -220,5 +233,5 @@ def _pydantic_message(exc: ValidationError, prefix: str) -> str:
     for err in exc.errors()[:3]:
         loc = ".".join(str(x) for x in err["loc"])
         key = f"{prefix}.{loc}" if prefix and loc else (loc or prefix)
-        parts.append(f"key '{key}': {err['msg']}")
+        parts.append(f"key '{key}': {err['msg'].removeprefix('Value error, ')}")
     return "; ".join(parts)

@@ -6,13 +6,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from sgbelief.errors import ConfigError, FormatError
 
 
 class _Frozen(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # every float must be finite: ``w0: .inf`` or ``alpha: .nan`` is rejected here, at the boundary
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class CalibrationConfig(_Frozen):
@@ -76,7 +77,7 @@ class OperatorConfig(_Frozen):
     """Hyperparameters of the operators; defaults are the paper's (Table 1) plus tau_T = 0.1."""
 
     format: Literal["sgbelief.operator_config"] = "sgbelief.operator_config"
-    version: int = 1
+    version: int = Field(1, strict=True, description="schema version (this sgbelief reads 1)")
     alpha: float = Field(0.1, gt=0.0, lt=1.0, description="conformal miscoverage level")
     tau_rev: float = Field(0.5, gt=0.0, description="revision threshold on KL(B || B'), nats")
     t_cor: int = Field(10, ge=0, description="corroboration window of the quarantine Q")
@@ -105,6 +106,13 @@ class OperatorConfig(_Frozen):
     calibration: CalibrationConfig = CalibrationConfig()
     baselines: BaselinesConfig = BaselinesConfig()
 
+    @field_validator("version")
+    @classmethod
+    def _version(cls, v: int) -> int:
+        if v != 1:
+            raise ValueError(f"unsupported version {v} (this sgbelief reads version 1)")
+        return v
+
     @property
     def compaction_interval(self) -> int:
         """Time steps between compaction passes: ``t_compact``, or T_prov when unset."""
@@ -120,6 +128,8 @@ class OperatorConfig(_Frozen):
             raise FormatError(
                 f"malformed YAML: {getattr(exc, 'problem', exc)}", path=p, line=mark.line + 1 if mark else None
             ) from exc
+        except UnicodeDecodeError as exc:
+            raise FormatError(f"not UTF-8 text (byte offset {exc.start})", path=p) from None
         if raw is None:
             raw = {}
         if not isinstance(raw, dict):
@@ -134,7 +144,7 @@ class OperatorConfig(_Frozen):
             msgs = []
             for err in exc.errors()[:3]:
                 key = ".".join(str(x) for x in err["loc"])
-                msgs.append(f"key '{key}': {err['msg']}")
+                msgs.append(f"key '{key}': {err['msg'].removeprefix('Value error, ')}")
             raise ConfigError(f"{source}: " + "; ".join(msgs)) from exc
 
     @classmethod

@@ -49,8 +49,8 @@ class EvidenceEvent:
             raise InvalidEventError("confidence", f"must be a number, got {type(c).__name__}")
         if not math.isfinite(c) or not 0.0 <= c <= 1.0:
             raise InvalidEventError("confidence", f"must be finite and in [0, 1], got {c!r}")
-        if isinstance(self.t, bool) or not isinstance(self.t, int):
-            raise InvalidEventError("t", f"must be an integer time step, got {self.t!r}")
+        if isinstance(self.t, bool) or not isinstance(self.t, int) or self.t < 0:
+            raise InvalidEventError("t", f"must be a non-negative integer time step, got {self.t!r}")
         if not isinstance(self.id, str) or not self.id:
             raise InvalidEventError("id", f"must be a non-empty string, got {self.id!r}")
         if not isinstance(self.targets, Mapping) or not self.targets:

@@ -25,11 +25,12 @@ import math
 import os
 import stat
 import tempfile
+import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, BinaryIO, Literal
 
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from sgbelief.errors import FormatError
 from sgbelief.graph.provenance import ProvenanceStore
@@ -47,7 +48,7 @@ _ZIP_MAGIC = b"PK\x03\x04"
 class _Envelope(BaseModel):
     model_config = ConfigDict(extra="allow")
     format: Literal["sgbelief.scene_graph"]
-    version: int
+    version: int = Field(strict=True)  # "1" (a string) is not a version
     vocabulary: list[str] | None = None
     clock: int = -1
     meta: dict[str, Any] = {}
@@ -151,12 +152,72 @@ def _umask() -> int:
     return mask
 
 
+#: temp files this process is writing right now (never removed as stale)
+_IN_FLIGHT: set[str] = set()
+#: a temp file without a writer's pid in its name (older sgbelief) is stale after this many seconds
+_LEGACY_TMP_AGE = 600.0
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # exists (another user's process) or cannot tell: keep its file
+    return True
+
+
+def remove_stale_temp_files(path: str | Path) -> list[Path]:
+    """Remove temp files a killed save of ``path`` left behind (``.<name>.<pid>.XXXX.tmp``).
+
+    A temp file is stale when the process whose pid it names is gone (or is this process, which
+    is not writing it); a temp file without a pid (written by an older sgbelief) when it is older
+    than ten minutes. Temp files of other targets, and of live writers, are left alone.
+    """
+    path = Path(path)
+    prefix, removed = f".{path.name}.", []
+    try:
+        names = os.listdir(path.parent)
+    except OSError:
+        return removed
+    me = os.getpid()
+    now = time.time()
+    for name in names:
+        if not (name.startswith(prefix) and name.endswith(".tmp")):
+            continue
+        cand = path.parent / name
+        if str(cand) in _IN_FLIGHT:
+            continue
+        middle = name[len(prefix):-len(".tmp")].split(".")
+        if len(middle) == 2 and middle[0].isdigit():
+            pid = int(middle[0])
+            stale = pid == me or not _pid_alive(pid)
+        elif len(middle) == 1:
+            try:
+                stale = now - cand.stat().st_mtime > _LEGACY_TMP_AGE
+            except OSError:
+                continue
+        else:
+            continue  # another file name pattern (e.g. a target whose name has more dots)
+        if stale:
+            try:
+                cand.unlink()
+                removed.append(cand)
+            except OSError:
+                pass
+    return removed
+
+
 def atomic_write_binary(path: str | Path, write: Callable[[BinaryIO], None]) -> None:
     """Call ``write(fh)`` on a temp file in the same directory, fsync, rename over ``path``.
-    Readers never see a partial file; on error the old file is left untouched."""
+    Readers never see a partial file; on error the old file is left untouched. Temp files that
+    an earlier, killed save of the same target left behind are removed first."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    remove_stale_temp_files(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    _IN_FLIGHT.add(tmp)
     try:
         # mkstemp creates the file 0600; give it the mode a plain open() would (or the old file's)
         try:
@@ -175,6 +236,8 @@ def atomic_write_binary(path: str | Path, write: Callable[[BinaryIO], None]) -> 
         except FileNotFoundError:
             pass
         raise
+    finally:
+        _IN_FLIGHT.discard(tmp)
 
 
 def save_graph(graph: SceneGraph, path: str | Path, *, format: str | None = None) -> Path:
@@ -211,8 +274,9 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGrap
         first = exc.errors()[0]
         loc = ".".join(str(x) for x in first["loc"])
         raise FormatError(f"field '{loc}': {first['msg']}", path=source) from exc
-    if env.version > VERSION:
-        raise FormatError(f"file has schema version {env.version}; this sgbelief reads up to {VERSION}", path=source)
+    if env.version > VERSION or env.version < 1:
+        raise FormatError(f"field 'version': file has schema version {env.version}; this sgbelief reads 1..{VERSION}",
+                          path=source)
     graph = SceneGraph(vocabulary=env.vocabulary)
     graph.clock = env.clock
     graph.meta = dict(env.meta)
@@ -224,6 +288,8 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGrap
             n = attrs.pop("id")
             if isinstance(n, bool) or not isinstance(n, (str, int)):
                 raise FormatError(f"field 'graph.nodes[{i}].id' must be a string or integer", path=source)
+            if n in g:  # a second entry would silently merge into (and drop) the first
+                raise FormatError(f"field 'graph.nodes[{i}].id': duplicate node id {n!r}", path=source)
             for key in ("centroid", "bbox"):
                 if key in attrs:
                     attrs[key] = restore_node_attr(key, attrs[key])
@@ -284,6 +350,7 @@ __all__ = [
     "graph_from_dict",
     "atomic_write_text",
     "atomic_write_binary",
+    "remove_stale_temp_files",
     "resolve_graph_path",
     "restore_node_attr",
 ]

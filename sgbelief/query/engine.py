@@ -8,7 +8,8 @@ with ``f_b = p`` for a plain and ``1 - p`` for a negated belief literal, ``p`` t
 of the node's Beta belief (``graph.probability``). Geometric literals come from the relation
 registry and are authoritative indicators (0 or 1; a negated one is ``1 - indicator``); a
 geometric predicate that cannot be decided (missing attribute, value None) gives 0 in *either*
-polarity. A node is retrieved when ``P >= tau`` (default 0.5).
+polarity. A node is retrieved when ``P > tau`` (strictly above; default 0.5) -- the commit rule of
+``SceneGraph.committed()`` and ``sgbelief inspect``, so a node at the prior 0.5 is never retrieved.
 
 Candidates: with ``require_evidence=True`` (default) only nodes that have evidence on every
 *positive* belief literal are scored -- a node nobody has made a claim about stays at the prior
@@ -96,6 +97,15 @@ class QueryResult:
     n_candidates: int
     name: str | None = None
     kinds: dict[str, str] = field(default_factory=dict)
+    #: nodes with P > tau before ``limit`` cut the list (None: count the retrieved matches listed)
+    total_retrieved: int | None = None
+
+    @property
+    def n_retrieved(self) -> int:
+        """How many candidates are retrieved (P > tau), whatever ``limit`` / ``include_all`` listed."""
+        if self.total_retrieved is not None:
+            return self.total_retrieved
+        return sum(1 for m in self.matches if m.retrieved)
 
     def __iter__(self) -> Iterator[Match]:
         return iter(self.matches)
@@ -118,7 +128,7 @@ class QueryResult:
         return {"query": self.name, "expression": self.expression, "tau": self.tau,
                 "components": [{"predicate": lit.name, "negated": lit.negated, "kind": self.kinds.get(lit.name)}
                                for lit in self.compound.literals],
-                "n_candidates": self.n_candidates, "n_retrieved": len(self.matches),
+                "n_candidates": self.n_candidates, "n_retrieved": self.n_retrieved, "n_listed": len(self.matches),
                 "results": [m.to_dict() for m in self.matches]}
 
     def table(self, limit: int | None = None) -> str:
@@ -132,11 +142,14 @@ class QueryResult:
                 for c in m.components])
         widths = [max(len(h), *(len(row[i]) for row in rows)) if rows else len(h) for i, h in enumerate(head)]
         fmt = lambda row: "  ".join(x.ljust(w) if i == 1 else x.rjust(w) for i, (x, w) in enumerate(zip(row, widths)))  # noqa: E731
+        listed = len(self.matches)
+        shown = f"; {listed} listed" if listed != self.n_retrieved else ""
         title = f"{self.name + ': ' if self.name else ''}{self.expression}   (tau = {self.tau}, " \
-                f"{len(self.matches)} retrieved of {self.n_candidates} candidates; b = belief, g = geometric)"
+                f"{self.n_retrieved} retrieved (P > tau) of {self.n_candidates} candidates{shown}; " \
+                f"b = belief, g = geometric)"
         out = [title, fmt(head)] + [fmt(r) for r in rows]
-        if limit and len(self.matches) > limit:
-            out.append(f"... {len(self.matches) - limit} more")
+        if limit and listed > limit:
+            out.append(f"... {listed - limit} more")
         return "\n".join(out)
 
 
@@ -317,8 +330,8 @@ class QueryEngine:
             values[k] = dict(zip(alive, got))
             for i, f in zip(alive, factors):
                 prob[i] *= f
-            if prune:
-                alive = [i for i in alive if not prob[i] < tau]
+            if prune:  # factors are <= 1: once P <= tau it stays there
+                alive = [i for i in alive if prob[i] > tau]
         order = {lit.name: i for i, lit in enumerate(lits)}
         rank = order.__getitem__
         evidence = {lits[k].name: self.evidence_nodes(lits[k].name) for k in steps if kinds[lits[k].name] == BELIEF}
@@ -336,7 +349,7 @@ class QueryEngine:
                     comps.append(Component(lit.name, GEOMETRIC, lit.negated, v,
                                            0.0 if v is None else float(v != lit.negated)))
             comps.sort(key=lambda c: rank(c.name))
-            out.append(Match(node, prob[i], tuple(comps), prob[i] >= tau))
+            out.append(Match(node, prob[i], tuple(comps), prob[i] > tau))
         return out
 
     def evaluate(self, expr: str | Compound, *, tau: float | None = None, nodes: Iterable[Any] | None = None,
@@ -349,9 +362,10 @@ class QueryEngine:
         matches = [m for m in self.score_many(pool, compound, kinds, prune=not include_all, tau=tau)
                    if include_all or m.retrieved]
         matches.sort(key=lambda m: (-m.probability, str(m.node)))
+        n_retrieved = sum(1 for m in matches if m.retrieved)
         if limit is not None:
             matches = matches[:limit]
-        return QueryResult(compound, tau, matches, len(pool), name=name, kinds=dict(kinds))
+        return QueryResult(compound, tau, matches, len(pool), name=name, kinds=dict(kinds), total_retrieved=n_retrieved)
 
     def evaluate_many(self, exprs: Mapping[str, str | Compound] | Iterable[str | Compound], **kw: Any) -> dict[str, QueryResult]:
         """Evaluate a batch sharing this engine's caches; keys are the names (or expressions)."""
@@ -386,5 +400,21 @@ def run_query(graph: Any, expr: str | Compound, tau: float = 0.5, registry: Rela
             name, expr = nq.name, nq.compound
             if config is None:
                 config = nq.config
+        else:
+            _check_not_a_mistyped_name(expr)
     engine = QueryEngine(graph, registry=registry, config=config, tau=tau, require_evidence=require_evidence)
     return engine.evaluate(expr, include_all=include_all, limit=limit, name=name)
+
+
+def _check_not_a_mistyped_name(expr: str) -> None:
+    """Words with no operator that do not parse ("car near unicorn") were meant as a named query:
+    say there is no such query and suggest the closest ones, instead of a syntax error."""
+    from sgbelief.query.language import QuerySyntaxError
+    from sgbelief.query.named import UnknownNamedQueryError, suggest_named_queries
+
+    if any(ch in expr for ch in "&|!()~") or len(expr.split()) < 2:
+        return
+    try:
+        parse(expr)
+    except QuerySyntaxError:
+        raise UnknownNamedQueryError(expr.strip(), suggest_named_queries(expr)) from None

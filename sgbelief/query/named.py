@@ -22,13 +22,25 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from sgbelief.errors import FormatError
+from sgbelief.errors import FormatError, SgbeliefError
 from sgbelief.query.language import Compound, Literal, QuerySyntaxError, parse
 from sgbelief.query.relations import RelationConfig
 
-__all__ = ["NamedQuery", "QuerySet", "load_query_set", "named_queries", "find_named_query", "DATASETS"]
+__all__ = ["NamedQuery", "QuerySet", "load_query_set", "named_queries", "find_named_query", "suggest_named_queries",
+           "UnknownNamedQueryError", "DATASETS"]
 
 DATASETS: tuple[str, ...] = ("kitti360", "scannet")
+
+
+class UnknownNamedQueryError(SgbeliefError, LookupError):
+    """Plain words that are neither an expression nor a shipped named query ("car near unicorn")."""
+
+    def __init__(self, text: str, suggestions: list[str]) -> None:
+        self.text = text
+        self.suggestions = suggestions
+        hint = f"; did you mean {', '.join(repr(s) for s in suggestions)}?" if suggestions else \
+            "; see configs/queries/*.yaml for the named queries, or write an expression such as 'is_car & is_stationary'"
+        super().__init__(f"no such named query {text!r}{hint}")
 
 
 @dataclass(frozen=True)
@@ -77,6 +89,8 @@ def load_query_set(path: str | Path) -> QuerySet:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
         raise FormatError(f"invalid YAML: {exc}", path=path) from None
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text (byte offset {exc.start})", path=path) from None
     if not isinstance(doc, Mapping) or doc.get("format") != "sgbelief.queries":
         raise FormatError("field 'format': expected 'sgbelief.queries'", path=path)
     if doc.get("version") != 1:
@@ -138,3 +152,21 @@ def find_named_query(text: str, dataset: str | None = None) -> NamedQuery | None
                    " ".join(q.title.lower().split())):
             return q
     return None
+
+
+def suggest_named_queries(text: str, dataset: str | None = None, n: int = 3) -> list[str]:
+    """Titles of the shipped named queries closest to ``text`` (for "did you mean ...")."""
+    import difflib
+
+    key = " ".join(text.strip().lower().replace("_", " ").split())
+    try:
+        qs = named_queries(dataset)
+    except FileNotFoundError:
+        return []
+    by_title = {q.title.lower(): q.title for q in qs.values()}
+    by_title.update({q.name.replace("_", " "): q.title for q in qs.values()})
+    out: list[str] = []
+    for hit in difflib.get_close_matches(key, list(by_title), n=2 * n, cutoff=0.5):
+        if by_title[hit] not in out:
+            out.append(by_title[hit])
+    return out[:n]

@@ -8,7 +8,7 @@ For every operator: replay the event log into a fresh graph, then for every name
   from the ground-truth class (``truth(node, predicate)``, negated literals inverted) and every
   geometric literal from the ground-truth geometry (authoritative, computed once on a copy of the
   map carrying ground-truth labels; committed beliefs are *not* used there);
-* **retrieved**: pool nodes with ``P(compound) >= tau`` (default 0.5) where belief components are
+* **retrieved**: pool nodes with ``P(compound) > tau`` (strictly above, the commit rule; default 0.5) where belief components are
   the operator's probability (``operator.probability``, i.e. after its recalibration, if any) and
   the geometric components are the same ground-truth indicators;
 * **F1** of retrieved vs. positives (``sgbelief.eval.metrics.retrieval_f1``).
@@ -55,7 +55,7 @@ class RetrievalData:
 
 @dataclass(frozen=True)
 class CompoundScore:
-    """One (compound, operator) cell: pool size, positive rate, F1 at P >= tau."""
+    """One (compound, operator) cell: pool size, positive rate, F1 at P > tau."""
 
     query: str
     title: str
@@ -297,7 +297,7 @@ def format_scores(scores: Sequence[CompoundScore], title: str = "") -> str:
             lines.append(f"[{group}]")
         cells = "  ".join(f"{d[o].f1:>11.3f}" if o in d else f"{'':>11}" for o in ops)
         lines.append(f"{first.title.ljust(w)}  {first.n:>6d}  {100 * first.pos_rate:>6.1f}  {cells}")
-    lines.append("(F1 at P >= tau over the full pool; n = nodes targeted by the VLM-typed predicate's events)")
+    lines.append("(F1 at P > tau over the full pool; n = nodes targeted by the VLM-typed predicate's events)")
     return "\n".join(lines)
 
 

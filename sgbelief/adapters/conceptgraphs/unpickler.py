@@ -13,6 +13,7 @@ import gzip
 import importlib
 import io
 import pickle
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -81,11 +82,17 @@ def load_cg_result(path: str | Path) -> Any:
     if raw[:2] == b"\x1f\x8b":
         try:
             raw = gzip.decompress(raw)
-        except OSError as exc:
-            raise FormatError(f"corrupt gzip stream: {exc}", path=path) from exc
+        except EOFError as exc:  # a truncated download / a save killed half way
+            raise FormatError(f"truncated gzip stream ({exc})", path=path) from None
+        except (OSError, zlib.error) as exc:
+            raise FormatError(f"corrupt gzip stream: {exc}", path=path) from None
     try:
         return restricted_loads(raw)
     except UnsafePickleError as exc:
         raise UnsafePickleError(f"{path}: {exc}") from None
-    except (pickle.UnpicklingError, EOFError, ValueError, TypeError, AttributeError) as exc:
-        raise FormatError(f"not a readable ConceptGraphs pickle: {exc}", path=path) from exc
+    except EOFError:
+        raise FormatError("truncated pickle (the stream ends before its STOP opcode)", path=path) from None
+    except (RecursionError, MemoryError):
+        raise FormatError("not a readable ConceptGraphs pickle: nested too deeply or too large", path=path) from None
+    except Exception as exc:  # noqa: BLE001 - any reconstruction failure of an allow-listed global is bad input
+        raise FormatError(f"not a readable ConceptGraphs pickle: {type(exc).__name__}: {exc}", path=path) from None
