@@ -127,8 +127,9 @@ def test_batched_engine_needs_ordered_times_and_names_the_line(tmp_path: Path, c
     args = ["replay", str(ev), "--truth", str(truth), "--vocab", "kitti360", "--no-progress", "--operators", "majority"]
     assert main([*args, "--engine", "batched"]) == 1
     err = capsys.readouterr().err
-    assert "events.jsonl:21" in err and "non-decreasing" in err
-    assert main([*args, "--engine", "auto"]) == 0  # falls back to the streaming engine
+    assert "events.jsonl:21" in err and "must not decrease" in err
+    assert main([*args, "--engine", "auto"]) == 1  # one rule for every engine: rejected too
+    assert "events.jsonl:21" in capsys.readouterr().err
     bad = json.dumps({"t": 3, "targets": {"s/car": 1.0}, "predicate": "is_carr", "confidence": 0.7, "context": "vlm", "geometric": {}})
     (tmp_path / "unknown").mkdir()
     ev2, _ = _write_stream(tmp_path / "unknown", bad)
@@ -153,3 +154,19 @@ def test_which_runs_the_batched_engine_takes(monkeypatch: pytest.MonkeyPatch) ->
     assert seen == ["majority", "naive_bayes", "overwrite"]
     assert all(r.events == 30 for r in runs) and runs[0].operator.stats["committed"] == 30
     assert not _batchable(runs[0])  # its graph is no longer empty
+
+
+@pytest.mark.parametrize("engine", ["streaming", "batched", "auto"])
+def test_event_times_going_back_are_rejected_by_every_engine(tmp_path: Path, engine: str,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """One rule for both engines (issue: the streaming engine used to accept it): t never decreases."""
+    lines = [json.dumps({"t": t, "targets": {"s/car": 1.0}, "predicate": "is_car", "confidence": 0.8,
+                         "context": "vlm", "geometric": {"s/car": "car"}}) for t in (0, 1, 5, 3, 6)]
+    ev = tmp_path / "events.jsonl"
+    ev.write_text("\n".join(lines) + "\n")
+    truth = tmp_path / "truth.json"
+    truth.write_text(json.dumps({"s/car": {"is_car": 1}}))
+    rc = main(["replay", str(ev), "--truth", str(truth), "--vocab", "kitti360", "--engine", engine, "--no-progress"])
+    assert rc != 0
+    err = capsys.readouterr().err
+    assert "events.jsonl:4" in err and "t goes back from 5 to 3" in err, err

@@ -126,7 +126,8 @@ def replay(
     ``engine``: ``streaming`` (event by event, records read incrementally), ``batched`` (the
     majority / naive_bayes / overwrite runs go through :func:`sgbelief.eval.batched.batched_replay`,
     bit-identical and faster (README's performance table has the measured figures); the other runs stream; records are held in memory; event times
-    must not decrease) or ``auto`` (batched when the stream allows it, streaming otherwise).
+    must not decrease) or ``auto`` (batched when the stream allows it, streaming otherwise). In every engine event times must not
+    decrease: a log whose t goes back is rejected, naming the line.
     """
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
@@ -140,10 +141,7 @@ def replay(
         lines.append(line_of.lines if line_of is not None else len(recs))
     back = next((i for i in range(1, len(recs)) if recs[i].t < recs[i - 1].t), None)
     if back is not None:
-        if engine == "batched":
-            raise FormatError(f"the batched engine needs non-decreasing event times; t goes back from "
-                              f"{recs[back - 1].t} to {recs[back].t} (use --engine streaming)", path=source, line=lines[back])
-        waves = []
+        raise FormatError(_time_goes_back(recs[back - 1].t, recs[back].t), path=source, line=lines[back])
     others = [r for r in runs if r not in waves]
     if others:
         _stream(recs, others, _Lines(lines), source, None)
@@ -169,6 +167,11 @@ class _Lines:
 STREAM_CHUNK = 512
 
 
+def _time_goes_back(before: int, after: int) -> str:
+    """The one rule of both engines: event times in a log never decrease."""
+    return f"event times must not decrease; t goes back from {before} to {after}"
+
+
 def _stream(records: Iterable[EventRecord], runs: Sequence[OperatorRun], line_of: Any, source: object,
             progress: Any) -> list[OperatorRun]:
     """The streaming engine: every record to every run, in order. Records are read a chunk at a
@@ -177,6 +180,7 @@ def _stream(records: Iterable[EventRecord], runs: Sequence[OperatorRun], line_of
     ``update``). Runs are independent, so the result is that of feeding each record to every run."""
     perf = time.perf_counter
     n = 0
+    last_t = -1
     advance = line_of.advance if isinstance(line_of, _Lines) else None
     many = [isinstance(run.operator, BaseOperator) for run in runs]
     it = iter(records)
@@ -189,6 +193,9 @@ def _stream(records: Iterable[EventRecord], runs: Sequence[OperatorRun], line_of
                 if advance is not None:
                     advance()
                 line = line_of.lines if line_of is not None else None
+                if rec.t < last_t:
+                    raise FormatError(_time_goes_back(last_t, rec.t), path=source, line=line)
+                last_t = rec.t
                 chunk.append(to_event(rec, f"line{line if line is not None else n}"))
                 lines.append(line)
             if not chunk:
