@@ -166,8 +166,9 @@ def real_detector_report(seed: int, alpha: float = 0.1) -> dict[str, Any]:
 TRACE_OPERATORS = ("cal", "comod", "comod_paper")
 #: Figure 1(a)'s element: the pair with the most geometry-contradicted claims among pairs with at least this many claims
 TRACE_MIN_CLAIMS = 10
-TRACE_RULE = (f"the (element, predicate) with the largest share of claims the geometric channel contradicts, among "
-              f"pairs with >= {TRACE_MIN_CLAIMS} claims (ties: more claims, then the first in the log)")
+TRACE_RULE = (f"the (element, predicate) with the largest share of claims that assert it (c >= 0.5) while the "
+              f"geometric channel labels the element as not it, among pairs with >= {TRACE_MIN_CLAIMS} claims "
+              f"(ties: more claims, then the first in the log)")
 
 
 def _contradicted_pair(events: Sequence[EventRecord], table: SubsumptionTable, preds: Sequence[str], *,
@@ -183,7 +184,7 @@ def _contradicted_pair(events: Sequence[EventRecord], table: SubsumptionTable, p
                 continue
             key = (node, rec.predicate)
             claims[key] = claims.get(key, 0) + 1
-            if table.verdict(rec.predicate, rec.geometric.get(node), rec.confidence).value == "contradicts":
+            if rec.confidence >= 0.5 and table.outcome(rec.predicate, rec.geometric.get(node)) == 0:
                 contra[key] = contra.get(key, 0) + 1
     eligible = [k for k in contra if claims[k] >= TRACE_MIN_CLAIMS]
     return max(eligible, key=lambda k: (contra[k] / claims[k], claims[k])) if eligible else None
@@ -234,7 +235,7 @@ def element_trace(
             op.update(graphs[name], ev, labels)
         if rec.predicate == pred and rec.targets.get(node, 0.0) > config.tau_t:
             k += 1
-            if table.verdict(pred, rec.geometric.get(node), rec.confidence).value == "contradicts":
+            if rec.confidence >= 0.5 and table.outcome(pred, rec.geometric.get(node)) == 0:
                 contradictions.append(k)
             for name in ops:
                 b = graphs[name].provenance.belief(node, pred)
@@ -252,6 +253,11 @@ def _plot_reliability(ax: Any, raw: Any, cal: Any, title: str) -> None:
     for bins, color, label in ((raw, "#7b3fa0", f"raw (ECE {raw.ece:.3f})"), (cal, "#f0745a", f"calibrated (ECE {cal.ece:.3f})")):
         m = bins.counts > 0
         ax.plot(bins.mean_confidence[m], bins.accuracy[m], marker="o", color=color, label=label)
+    # the raw bins' counts (how much each point rests on), as a bar strip along the bottom
+    edges = np.linspace(0.0, 1.0, len(raw.counts) + 1)
+    share = raw.counts / max(1, int(raw.counts.sum()))
+    ax.bar(edges[:-1], 0.25 * share / max(share.max(), 1e-12), width=np.diff(edges), align="edge", color="0.85",
+           zorder=0, label=f"raw claims per bin (n = {int(raw.counts.sum())}; tallest = {int(raw.counts.max())})")
     ax.set_xlabel("confidence / calibrated probability")
     ax.set_ylabel("observed frequency")
     ax.set_xlim(0, 1), ax.set_ylim(0, 1)
@@ -281,15 +287,15 @@ def make_figures(results: dict[str, Any], out: Path, real: dict[str, Any], sim_c
             axes[0].axvline(k, color="0.85", lw=0.6, zorder=0)
         axes[0].axhline(0.5, color="0.5", ls=":", lw=1)
         axes[0].set_ylim(0, 1)
-        axes[0].set_xlabel(f"event at {tr['node']} ({tr['predicate']}); grey = geometric contradiction")
+        axes[0].set_xlabel(f"claim at {tr['node']} ({tr['predicate']}); grey: geometry says not")
         axes[0].set_ylabel(f"posterior mean (truth: {truth})")
-        axes[0].set_title(f"(a) {tr['events']} events, {len(tr['contradictions'])} contradicted", fontsize=9)
+        axes[0].set_title(f"(a) {tr['events']} claims, {len(tr['contradictions'])} asserted against the geometry", fontsize=9)
         axes[0].legend(fontsize=7)
         xs = np.linspace(0.001, 0.999, 400)
         for name, color in _TRACE_COLOURS.items():
             a, b = tr["final"][name]
             axes[2].plot(xs, stats.beta(a, b).pdf(xs), color=color, label=f"{name}: Beta({a:.1f}, {b:.1f}), mean {a / (a + b):.2f}")
-        axes[2].axvline(float(truth), color="k", lw=2)
+        axes[2].axvline(float(truth), color="k", lw=2, label=f"truth ({truth})")
         axes[2].set_xlabel("P(predicate)")
         axes[2].set_title(f"(c) final Beta posteriors (truth {truth})", fontsize=9)
         axes[2].legend(fontsize=7)
@@ -545,10 +551,10 @@ def render_markdown(results: dict[str, Any]) -> str:
             t = res["trace"]
             fin = ", ".join(f"{k} {v[0] / (v[0] + v[1]):.3f}" for k, v in t["final"].items())
             lines += ["", f"Figure 1(a) element ({t.get('rule', TRACE_RULE)}): {t['node']} / {t['predicate']}, "
-                      f"{t['events']} claims, {len(t['contradictions'])} contradicted by the geometric channel; "
+                      f"{t['events']} claims, {len(t['contradictions'])} asserted while the geometric channel said not; "
                       f"final mean {fin} (truth {t.get('truth', '?')})."]
         if "retrieval" in res:
-            lines += ["", "### Compound-query retrieval, full pool (Table 3 layout): F1 at p ≥ 0.5", ""]
+            lines += ["", "### Compound-query retrieval, full pool (Table 3 layout): F1 at p > tau", ""]
             ops = list(dict.fromkeys(r["operator"] for r in res["retrieval"]))
             lines += ["| compound | n | pos % | " + " | ".join(ops) + " |", "|---|---|---|" + "---|" * len(ops)]
             by = {}
