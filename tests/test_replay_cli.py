@@ -170,3 +170,17 @@ def test_event_times_going_back_are_rejected_by_every_engine(tmp_path: Path, eng
     assert rc != 0
     err = capsys.readouterr().err
     assert "events.jsonl:4" in err and "t goes back from 5 to 3" in err, err
+
+
+def test_replay_says_which_predicates_its_miou_averages(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """One meaning per number: replay names the predicates behind mIoU, and --predicates picks them."""
+    ev, truth = _write_stream(tmp_path)
+    base = ["replay", str(ev), "--truth", str(truth), "--vocab", "kitti360", "--no-progress", "--operators", "majority"]
+    assert main(base) == 0
+    assert "mean IoU over these 2 predicates (is_car, is_pedestrian)" in capsys.readouterr().out
+    out = tmp_path / "one.json"
+    assert main([*base, "--predicates", "is_car", "--json", str(out)]) == 0
+    assert "over these 1 predicates (is_car)" in capsys.readouterr().out
+    assert set(json.loads(out.read_text())["majority"]["per_predicate"]) == {"is_car"}
+    assert main([*base, "--predicates", "is_unicorn"]) != 0
+    assert "not in the truth file" in capsys.readouterr().err

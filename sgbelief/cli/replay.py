@@ -27,6 +27,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tau", type=float, default=0.5,
                    help="commit threshold for the metrics: committed when P > tau (default: %(default)s)")
     p.add_argument("--allow-unknown-predicates", action="store_true", help="accept predicates the vocabulary does not define (default: an error)")
+    p.add_argument("--predicates", default=None,
+                   help="comma-separated predicates to score; mIoU is their unweighted mean (default: every "
+                        "predicate of the vocabulary that the truth file mentions; bench's tables use each suite's "
+                        "three evaluated predicates, e.g. is_car,is_pedestrian,is_traffic_sign outdoors)")
     p.add_argument("--no-progress", action="store_true",
                    help="no progress bar (default: a bar on stderr when it is a terminal)")
     p.add_argument("--engine", choices=["streaming", "batched", "auto"], default="streaming",
@@ -73,11 +77,11 @@ def run(args: argparse.Namespace) -> int:
         if progress is not None:
             progress.close()
     require_events(stats, args.events)  # an empty log: an error, and no saved graph overwritten
-    preds = [p for p in vocab.predicates if any(p in row for row in truth.values())]
-    preds += sorted({p for row in truth.values() for p in row} - set(preds))
+    preds = _predicates(vocab, truth, args.predicates)
     scores = {r.name: score_run(r, truth, preds, tau=args.tau) for r in runs}
     print(f"{stats.events} events replayed from {args.events}" + (f" ({stats.skipped} bad lines skipped)" if stats.skipped else ""))
     print(format_table(scores, preds))
+    print(_miou_note(preds))
     if args.json_out:
         doc = {name: sc.as_dict() for name, sc in scores.items()}
         for d in doc.values():
@@ -89,9 +93,24 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _predicates(vocab, truth) -> list[str]:
-    preds = [p for p in vocab.predicates if any(p in row for row in truth.values())]
-    return preds + sorted({p for row in truth.values() for p in row} - set(preds))
+def _predicates(vocab, truth, chosen: str | None = None) -> list[str]:
+    """The scored predicates: ``--predicates`` (checked against the truth), else all the truth mentions."""
+    from sgbelief.errors import ConfigError
+
+    known = [p for p in vocab.predicates if any(p in row for row in truth.values())]
+    known += sorted({p for row in truth.values() for p in row} - set(known))
+    if chosen is None:
+        return known
+    preds = [p.strip() for p in chosen.split(",") if p.strip()]
+    missing = [p for p in preds if p not in known]
+    if missing or not preds:
+        raise ConfigError(f"--predicates: {', '.join(missing) or '(none given)'} not in the truth file; "
+                          f"it has {', '.join(known)}")
+    return preds
+
+
+def _miou_note(preds: list[str]) -> str:
+    return f"mIoU: unweighted mean IoU over these {len(preds)} predicates ({', '.join(preds)})"
 
 
 def _run_scenes(args: argparse.Namespace, names: list[str], truth, vocab, config) -> int:
@@ -105,12 +124,13 @@ def _run_scenes(args: argparse.Namespace, names: list[str], truth, vocab, config
                      args.engine)
             for e in args.events]
     results = run_scenes(replay_scene, jobs, workers=args.workers, executor=args.executor)
-    preds = _predicates(vocab, truth)
+    preds = _predicates(vocab, truth, args.predicates)
     scores = pool_scene_scores(results, truth, preds, tau=args.tau)
     n = sum(r.n_events for r in results)
     skipped = sum(r.skipped for r in results)
     print(f"{n} events replayed from {len(results)} scenes" + (f" ({skipped} bad lines skipped)" if skipped else ""))
     print(format_table(scores, preds))
+    print(_miou_note(preds))
     if args.json_out:
         doc = {name: sc.as_dict() for name, sc in scores.items()}
         for d in doc.values():
