@@ -184,3 +184,30 @@ def test_replay_says_which_predicates_its_miou_averages(tmp_path: Path, capsys: 
     assert set(json.loads(out.read_text())["majority"]["per_predicate"]) == {"is_car"}
     assert main([*base, "--predicates", "is_unicorn"]) != 0
     assert "not in the truth file" in capsys.readouterr().err
+
+
+def test_saved_graphs_carry_the_nodes_geometry(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A log with a nodes.json beside it: the saved maps have boxes and attributes (not {}), so
+    geometric queries on them work; without one, replay says so."""
+    from sgbelief.eval.formats import write_events, write_nodes, write_truth
+
+    nodes = {"d/1": {"scene": "d", "label": "car", "centroid": (0, 0, 0), "bbox_min": (-2, -1, 0),
+                     "bbox_max": (2, 1, 1.5), "attributes": {"road_distance_px": 5.0}},
+             "d/2": {"scene": "d", "label": "building", "centroid": (30, 0, 0), "bbox_min": (25, -5, 0),
+                     "bbox_max": (35, 5, 10)}}
+    write_nodes(tmp_path / "nodes.json", {"suite": "t", "nodes": nodes})
+    write_truth(tmp_path / "truth.json", {"d/1": {"is_car": 1}, "d/2": {"is_car": 0}})
+    write_events(tmp_path / "events.jsonl", [
+        {"t": t, "targets": {"d/1": 1.0}, "predicate": "is_car", "confidence": 0.9, "context": "vlm",
+         "geometric": {"d/1": "car"}} for t in range(4)])
+    args = ["replay", str(tmp_path / "events.jsonl"), "--truth", str(tmp_path / "truth.json"), "--vocab", "kitti360",
+            "--operators", "comod", "--no-progress", "--save-graph", str(tmp_path / "maps")]
+    assert main(args) == 0
+    g = SceneGraph.load(tmp_path / "maps" / "comod")
+    assert set(g.nodes()) == {"d/1", "d/2"}  # every element of the map, claimed or not
+    assert g.node_attrs("d/1")["bbox"] == ((-2.0, -1.0, 0.0), (2.0, 1.0, 1.5))
+    assert g.node_attrs("d/1")["attributes"] == {"road_distance_px": 5.0}
+    (tmp_path / "nodes.json").unlink()
+    capsys.readouterr()
+    assert main(args) == 0
+    assert "carry no geometry" in capsys.readouterr().err

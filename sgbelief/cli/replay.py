@@ -19,6 +19,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=None, help="operator config YAML (default: configs/operators/default.yaml)")
     p.add_argument("--json", type=Path, default=None, dest="json_out", help="write metrics per operator as JSON (default: none)")
     p.add_argument("--save-graph", type=Path, default=None, help="save each operator's final graph under DIR/<operator>/ (default: not saved)")
+    p.add_argument("--nodes", type=Path, default=None,
+                   help="nodes.json whose geometry and attributes the saved graphs carry (default: nodes.json beside "
+                        "the events file, when there is one; the simulator and bench write it)")
     p.add_argument("--graph-format", choices=["json", "npz"], default="json",
                    help="format of the saved graphs: json (graph.json, default) or npz (graph.npz, the binary layout "
                         "for large maps)")
@@ -88,9 +91,24 @@ def run(args: argparse.Namespace) -> int:
             d["skipped_lines"] = stats.skipped
         atomic_write_text(args.json_out, json.dumps(doc, indent=2, allow_nan=True))
     if args.save_graph:
+        nodes_file = args.nodes if args.nodes is not None else Path(args.events).with_name("nodes.json")
+        attrs = _node_attributes(nodes_file) if (args.nodes is not None or nodes_file.is_file()) else None
+        if attrs is None:
+            print(f"note: no nodes.json beside {args.events}: the saved graphs carry no geometry, so geometric and "
+                  f"named queries on them find nothing (--nodes gives one)", file=sys.stderr)
         for r in runs:
+            if attrs is not None:
+                for node, a in attrs.items():
+                    r.graph.add_node(node, **a)
             r.graph.save(args.save_graph / r.name, format=args.graph_format)
     return 0
+
+
+def _node_attributes(path: Path) -> dict[str, dict]:
+    """node id -> scene-graph attributes, from a nodes.json (errors name the file)."""
+    from sgbelief.eval.formats import node_attributes, read_nodes
+
+    return {nid: node_attributes(info) for nid, info in read_nodes(path).nodes.items()}
 
 
 def _predicates(vocab, truth, chosen: str | None = None) -> list[str]:

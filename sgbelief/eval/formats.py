@@ -529,6 +529,15 @@ def read_nodes(path: str | os.PathLike[str]) -> NodesFile:
         raise FormatError(f"field '{loc}': {err['msg']}", path=path) from None
 
 
+def node_attributes(info: NodeInfo) -> dict[str, Any]:
+    """A node's ``nodes.json`` record as scene-graph node attributes (``bbox`` from bbox_min / bbox_max,
+    unset fields left out): what ``SceneGraph.add_node(node, **attrs)`` takes."""
+    d = info.model_dump()
+    attrs = {k: v for k, v in d.items() if k not in ("bbox_min", "bbox_max") and v is not None}
+    attrs["bbox"] = (tuple(info.bbox_min), tuple(info.bbox_max))
+    return attrs
+
+
 def write_nodes(path: str | os.PathLike[str], nodes: NodesFile | Mapping[str, Any]) -> None:
     """Write ``nodes.json`` atomically (validated first)."""
     doc = nodes if isinstance(nodes, NodesFile) else NodesFile.model_validate(nodes)

@@ -389,7 +389,7 @@ def suite_retrieval_data(suite: str | Path, vocab: Any = None, *, queries: Any =
     labels; geometric predicates use the nodes' precomputed ``geometric_predicates`` when present
     and the registry otherwise. ``vocab`` defaults to scannet for all-indoor suites, else kitti360;
     ``queries`` defaults to the vocabulary's dataset name."""
-    from sgbelief.eval.formats import read_events, read_nodes, read_truth
+    from sgbelief.eval.formats import node_attributes, read_events, read_nodes, read_truth
 
     suite = Path(suite)
     for f in ("nodes.json", "events.jsonl", "truth.json"):
@@ -402,10 +402,7 @@ def suite_retrieval_data(suite: str | Path, vocab: Any = None, *, queries: Any =
     table = _load_vocab(vocab)
     nodes: dict[Any, dict[str, Any]] = {}
     for nid, info in nf.nodes.items():
-        d = info.model_dump()
-        attrs = {k: v for k, v in d.items() if k not in ("bbox_min", "bbox_max") and v is not None}
-        attrs["bbox"] = (tuple(info.bbox_min), tuple(info.bbox_max))
-        nodes[nid] = attrs
+        nodes[nid] = node_attributes(info)
     truth_map = read_truth(suite / "truth.json")
     recs = read_events(suite / "events.jsonl")
     if queries is None:
