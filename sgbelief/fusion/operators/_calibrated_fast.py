@@ -85,8 +85,8 @@ def apply_fused(
             frame = label_of is not None and type(channel) is FrameLabels
             raw_pos = c >= 0.5
             e_targets = e_below = e_committed = e_quarantined = e_refused = 0
-            lam = kappa = -1.0
-            lam_ctx = None
+            # per stratum of this event: (context, Lambda_hat, kappa_hat), computed on first use
+            by_stratum: list[tuple[str, float, float] | None] = [None] * n_strata
             new_outcomes: list[tuple[int, str]] = []
             outcomes: list[TargetOutcome] = []
             pair_slice: ConformalSlice | None = None  # this predicate's pair-level scores, fetched once
@@ -106,27 +106,28 @@ def apply_fused(
                     n_prev = claims_get(key)
                     if n_prev is None:
                         n_prev = 0 if log is None else op._claims_in_log(prov, node, pred)
-                    sctx = f"{ctx}|s{n_prev if n_prev < top else top}"
+                    stratum = n_prev if n_prev < top else top
                 else:
-                    sctx = ctx
+                    stratum = 0
+                cached = by_stratum[stratum]
+                if cached is None:
+                    sctx = f"{ctx}|s{stratum}" if n_strata > 1 else ctx
+                    lam_s, kappa_s = calibrator.likelihood_ratio(c, sctx, pred)
+                    cached = by_stratum[stratum] = (sctx, lam_s, kappa_s)
+                sctx, lam, kappa = cached
                 if mass <= tau_t:  # discarded; its verdict is only reported
                     e_below += 1
                     if y is None:
                         verdict = _NO_CLAIM
                     else:
                         pos = raw_pos
-                        if cal_sign:
-                            lam_b = calibrator.likelihood_ratio(c, sctx, pred)[0]
-                            if lam_b != 1.0:
-                                pos = lam_b > 1.0
+                        if cal_sign and lam != 1.0:
+                            pos = lam > 1.0
                         verdict = _CORR if (y == 1) == pos else _CONTRA
                     outcomes.append(TargetOutcome(node, mass, verdict, _BELOW))
                     continue
                 if n_strata > 1:
                     claims[key] = n_prev + 1
-                if sctx != lam_ctx:
-                    lam, kappa = calibrator.likelihood_ratio(c, sctx, pred)
-                    lam_ctx = sctx
                 claim_pos = (lam > 1.0) if (cal_sign and lam != 1.0) else raw_pos
                 if y is None:
                     verdict = _NO_CLAIM
