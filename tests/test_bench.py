@@ -22,7 +22,7 @@ def test_bench_tiny_indoor(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert set(res["table2"]) == {"overwrite", "majority", "naive_bayes", "refined", "cal", "comod",
                                   "cal_paper", "comod_paper"}
     assert set(res["table2_segmenter"]) == set(res["table2"])
-    assert "shipped default" in text and "belief-preservation pool" in text and "Figure 1(a) element" in text
+    assert "shipped default" in text and "belief-preservation pool" in text and "Figure 1(a)" in text
     assert res["belief_preservation_pool"] > 0
     assert all("pool_brier_vlm_a" in v for v in res["vlm_swap"].values())
     assert res["calibration"]["calibrated_ece"] < res["calibration"]["raw_ece"]

@@ -437,7 +437,9 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
         cal_report = calibration_split(c, y, list(zip(k, p)), seed=seed, alpha=config.alpha)
         res["calibration"] = {kk: v for kk, v in cal_report.items() if not kk.startswith("_")}
     pair = _contradicted_pair(ev_a, table, preds, tau_t=config.tau_t)
-    if pair is not None:
+    if pair is None:
+        res["trace_note"] = f"no element of this suite qualifies for Figure 1(a) ({TRACE_RULE})"
+    else:
         progress(f"{name}: trace of contradicted element {pair}")
         trace = element_trace(ev_a, table, pair, config)
         trace["truth"] = int(suite.truth.get(pair[0], {}).get(pair[1], 0))
@@ -553,6 +555,8 @@ def render_markdown(results: dict[str, Any]) -> str:
             lines += ["", f"Figure 1(a) element ({t.get('rule', TRACE_RULE)}): {t['node']} / {t['predicate']}, "
                       f"{t['events']} claims, {len(t['contradictions'])} asserted while the geometric channel said not; "
                       f"final mean {fin} (truth {t.get('truth', '?')})."]
+        elif "trace_note" in res:
+            lines += ["", f"Figure 1(a): {res['trace_note']}."]
         if "retrieval" in res:
             lines += ["", "### Compound-query retrieval, full pool (Table 3 layout): F1 at p > tau", ""]
             ops = list(dict.fromkeys(r["operator"] for r in res["retrieval"]))
