@@ -298,7 +298,10 @@ def load_scene(scene_dir: str | Path, labels: LabelMap | str | Path | None = Non
             raise FileNotFoundError(f"{LABELS_TSV} not found in {scene_dir} or its parents; pass labels=PATH")
         labels = load_label_map(tsv)
 
-    mesh = o3d.io.read_triangle_mesh(str(files["mesh"]))
+    # a ScanNet _vh_clean_2.ply read as a mesh makes open3d warn "TriangleMesh appears to be a
+    # PointCloud" once per scene; only its errors reach the console
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        mesh = o3d.io.read_triangle_mesh(str(files["mesh"]))
     vertices = np.asarray(mesh.vertices, dtype=float)
     if vertices.ndim != 2 or len(vertices) == 0:
         raise FormatError("mesh has no vertices (unreadable or empty PLY)", path=files["mesh"])
