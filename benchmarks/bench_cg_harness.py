@@ -33,6 +33,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--channels", default="oracle,segmenter,none")
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--seed", type=int, default=3)
+    ap.add_argument("--objects", type=int, default=0,
+                    help="map size to aim for: pre-populate the map with N - 15 far-away copies of the first "
+                         "frame's detections (see cg_harness.run); prints per-frame medians")
     ap.add_argument("--json", default=None, help="write the results here")
     args = ap.parse_args(argv)
     if not args.cg:
@@ -43,24 +46,52 @@ def main(argv: list[str] | None = None) -> int:
     out = {"branch": gen, "path": args.cg, "operator": args.operator, "operator_config": args.operator_config,
            "frames": args.frames, "runs": []}
     t0 = time.perf_counter()
-    vote = H.run(world, cg, args.cg, seed=args.seed)
+    pre = max(0, args.objects - len(H.WORLD)) if args.objects else 0
+    out["objects_target"], out["prepopulated"] = args.objects, pre
+    vote = H.run(world, cg, args.cg, seed=args.seed, prepopulate=pre)
+    if args.objects:
+        _medians(gen, "conceptgraphs-vote", vote)
     print(f"[{gen}] ConceptGraphs vote            acc {vote.accuracy:.3f}  mIoU {vote.miou:.3f}  "
           f"objects {vote.n_objects}  fusion {np.mean(vote.fusion_ms):.1f} ms/frame  ({time.perf_counter() - t0:.0f} s)")
     out["runs"].append({"channel": None, "operator": "conceptgraphs-vote", "accuracy": vote.accuracy,
                         "miou": vote.miou, "objects": vote.n_objects, "fusion_ms": float(np.mean(vote.fusion_ms))})
+    if args.objects:
+        out["runs"][-1].update(_per_frame(vote))
     for ch in [c for c in args.channels.split(",") if c]:
         t0 = time.perf_counter()
         backend = H.make_backend(args.operator, H.make_channel(world, ch), operator_config=args.operator_config)
-        r = H.run(world, cg, args.cg, backend=backend, seed=args.seed)
+        r = H.run(world, cg, args.cg, backend=backend, seed=args.seed, prepopulate=pre)
         s = r.summary
+        if args.objects:
+            _medians(gen, f"{args.operator}/{ch}", r)
+            med_v, med_b = float(np.median(vote.fusion_ms)), float(np.median(r.fusion_ms))
+            dm = float(np.median(np.subtract(r.merge_ms, vote.merge_ms))) if len(r.merge_ms) == len(vote.merge_ms) \
+                else float(np.median(r.merge_ms) - np.median(vote.merge_ms))
+            print(f"[{gen}] added by the backend ({ch}): {100 * (med_b / med_v - 1):+.1f} % of the median fusion step; "
+                  f"merge with - without, median over frames {dm:+.1f} ms = {100 * dm / med_v:+.1f} % of the step")
         print(f"[{gen}] {args.operator:<8} channel={ch:<9} acc {r.accuracy:.3f}  mIoU {r.miou:.3f}  "
               f"objects {r.n_objects}  unknown {s.unknown}  fusion {np.mean(r.fusion_ms):.1f} ms/frame  "
               f"({time.perf_counter() - t0:.0f} s)")
         out["runs"].append({"channel": ch, "operator": args.operator, "accuracy": r.accuracy, "miou": r.miou,
                             "objects": r.n_objects, "unknown": s.unknown, "fusion_ms": float(np.mean(r.fusion_ms))})
+        if args.objects:
+            out["runs"][-1].update(_per_frame(r))
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
     return 0
+
+
+def _per_frame(r: H.RunResult) -> dict:
+    return {"fusion_ms_frames": r.fusion_ms, "n_dets_frames": r.n_dets, "n_map_frames": r.n_map,
+            "box3d_ms_frames": r.box3d_ms, "merge_ms_frames": r.merge_ms, "merge_ms_median": float(np.median(r.merge_ms)),
+            "fusion_ms_median": float(np.median(r.fusion_ms))}
+
+
+def _medians(gen: str, name: str, r: H.RunResult) -> None:
+    print(f"[{gen}] {name:<20} timed frames {len(r.fusion_ms)}  map objects (median) {np.median(r.n_map):.0f}  "
+          f"detections/frame (median) {np.median(r.n_dets):.0f}  fusion median {np.median(r.fusion_ms):.1f} ms "
+          f"(of which merge {np.median(r.merge_ms):.1f} ms, box3d stand-in {np.median(r.box3d_ms):.1f} ms; first timed frame {r.fusion_ms[0]:.1f} ms, "
+          f"max {max(r.fusion_ms):.1f} ms)")
 
 
 if __name__ == "__main__":

@@ -23,10 +23,12 @@ Used by ``benchmarks/bench_cg_harness.py`` and ``tests/test_conceptgraphs_harnes
 
 from __future__ import annotations
 
+import copy
 import os
 import sys
 import time
 import types
+import uuid
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
@@ -221,13 +223,21 @@ def _stub(name: str, **attrs: Any) -> None:
     sys.modules[name] = mod
 
 
+BOX3D_S = [0.0]  # seconds spent in the box3d_overlap stand-in (harness code, not ConceptGraphs')
+
+
 def box3d_overlap(boxes1: Any, boxes2: Any, eps: float = 1e-4) -> tuple[Any, Any]:
     """pytorch3d.ops.box3d_overlap stand-in (no wheel for this platform): (N, M) intersection volumes
     and IoUs of boxes given as 8 corners in pytorch3d's order, by a 12^3 grid in each box of ``boxes1``."""
     import torch
 
+    t_start = time.perf_counter()
     b1 = boxes1.detach().double().cpu().numpy()
     b2 = boxes2.detach().double().cpu().numpy()
+    # exact rejection: boxes whose corners' axis-aligned bounds are disjoint cannot intersect
+    lo1, hi1 = b1.min(axis=1), b1.max(axis=1)
+    lo2, hi2 = b2.min(axis=1), b2.max(axis=1)
+    near = np.all((lo1[:, None] <= hi2[None] + eps) & (lo2[None] <= hi1[:, None] + eps), axis=2)
     g = (np.arange(12) + 0.5) / 12
     grid = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
 
@@ -242,10 +252,12 @@ def box3d_overlap(boxes1: Any, boxes2: Any, eps: float = 1e-4) -> tuple[Any, Any
 
     inter = np.zeros((len(b1), len(b2)))
     for i, bi in enumerate(b1):
+        if not near[i].any():
+            continue
         o, ax = frame(bi)
         pts = o + grid @ ax
-        for j, bj in enumerate(b2):
-            oj, axj = frame(bj)
+        for j in np.flatnonzero(near[i]):
+            oj, axj = frame(b2[j])
             try:
                 local = np.linalg.solve(axj.T, (pts - oj).T).T
             except np.linalg.LinAlgError:
@@ -255,6 +267,7 @@ def box3d_overlap(boxes1: Any, boxes2: Any, eps: float = 1e-4) -> tuple[Any, Any
     v1 = np.array([volume(b) for b in b1])[:, None]
     v2 = np.array([volume(b) for b in b2])[None, :]
     iou = inter / np.maximum(v1 + v2 - inter, 1e-12)
+    BOX3D_S[0] += time.perf_counter() - t_start
     return torch.from_numpy(inter).float(), torch.from_numpy(iou).float()
 
 
@@ -327,11 +340,22 @@ class RunResult:
     n_objects: int
     fusion_ms: list[float] = field(default_factory=list)  # per frame: ConceptGraphs' fusion step
     summary: Any = None
+    n_dets: list[int] = field(default_factory=list)  # per timed frame: detections fused
+    n_map: list[int] = field(default_factory=list)  # per timed frame: map objects before the fusion step
+    box3d_ms: list[float] = field(default_factory=list)  # per timed frame: of fusion_ms, the box3d stand-in
+    # per timed frame: of fusion_ms, the merge (main: merge_detections_to_objects; ali-dev: match +
+    # merge_obj_matches + the relabel loop), where the backend, when installed, does its work
+    merge_ms: list[float] = field(default_factory=list)
 
 
 def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 3, frames: int | None = None,
-        fusion_hook: Any = None) -> RunResult:
-    """ConceptGraphs' per-frame loop on ``world`` (backend installed around it when given)."""
+        fusion_hook: Any = None, prepopulate: int = 0) -> RunResult:
+    """ConceptGraphs' per-frame loop on ``world`` (backend installed around it when given).
+
+    ``prepopulate``: after the first frame's detections seed the map, append this many copies of them
+    moved onto a grid outside the room (x >= 10 m), so the map holds ``prepopulate`` objects more
+    while the frames' detections stay those of the room; ConceptGraphs' similarities and merges run
+    over the whole map. The copies are left out of the accuracy."""
     utils, mapping, slam_classes, gen = cg
     cfg = cg_config(path, gen)
     rng = np.random.default_rng(seed)
@@ -342,7 +366,11 @@ def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 
         MapObjectList = slam_classes.MapObjectList  # noqa: N806  (rebound by the patch on Python >= 3.11)
         objects = MapObjectList(device="cpu") if backend is not None else slam_classes.MapObjectList()
         n = len(world.frames) if frames is None else frames
-        fusion_ms = []
+        fusion_ms: list[float] = []
+        n_dets: list[int] = []
+        n_map: list[int] = []
+        box3d_ms: list[float] = []
+        merge_ms: list[float] = []
         for idx in range(n):
             fr = world.frames[idx]
             dets = detect(world, idx, rng, feats=feats)
@@ -388,13 +416,19 @@ def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 
                         objects.append(d)
                 else:
                     objects.extend(detection_list)
+                for k in range(prepopulate):
+                    objects.append(_far_copy(detection_list[k % len(detection_list)], k))
                 continue
+            n_dets.append(len(detection_list))
+            n_map.append(len(objects))
+            box0 = BOX3D_S[0]
             t0 = time.perf_counter()
             if gen == "main":
                 spatial = mapping.compute_spatial_similarities(cfg, detection_list, objects)
                 visual = mapping.compute_visual_similarities(cfg, detection_list, objects)
                 agg = mapping.aggregate_similarities(cfg, spatial, visual)
                 agg[agg < cfg.sim_threshold] = float("-inf")
+                t1 = time.perf_counter()
                 objects = mapping.merge_detections_to_objects(cfg, detection_list, objects, agg)
             else:
                 spatial = mapping.compute_spatial_similarities(spatial_sim_type=cfg.spatial_sim_type,
@@ -403,6 +437,7 @@ def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 
                 visual = mapping.compute_visual_similarities(detection_list, objects)
                 agg = mapping.aggregate_similarities(match_method=cfg.match_method, phys_bias=cfg.phys_bias,
                                                      spatial_sim=spatial, visual_sim=visual)
+                t1 = time.perf_counter()
                 match = mapping.match_detections_to_objects(agg_sim=agg, detection_threshold=cfg.sim_threshold)
                 objects = mapping.merge_obj_matches(detection_list=detection_list, objects=objects,
                                                     match_indices=match,
@@ -415,7 +450,10 @@ def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 
                     name = world.classes[cid]
                     if obj["class_name"] != name:
                         obj["class_name"] = name
-            fusion_ms.append(1000 * (time.perf_counter() - t0))
+            t2 = time.perf_counter()
+            fusion_ms.append(1000 * (t2 - t0))
+            merge_ms.append(1000 * (t2 - t1))
+            box3d_ms.append(1000 * (BOX3D_S[0] - box0))
             if fusion_hook is not None:
                 fusion_hook(idx, objects)
             if idx < n - 1:
@@ -423,12 +461,31 @@ def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 
         objects = _post(cfg, utils, gen, objects, n - 1, final=True)  # the scripts' end-of-run pass
         labels = _labels(objects, gen, world.classes)
         summary = backend.summary(objects) if backend is not None else None
+    if prepopulate:
+        keep = [k for k, o in enumerate(objects) if not str(o["color_path"][0]).startswith("prepopulated")]
+        labels, objects = [labels[k] for k in keep], [objects[k] for k in keep]
     truth = []
     for obj in objects:
         votes = Counter(truth_of.get((int(i), int(m)), -1) for i, m in zip(obj["image_idx"], obj["mask_idx"]))
         truth.append(votes.most_common(1)[0][0])
     acc = float(np.mean([lab == (world.objects[t][0] if t >= 0 else None) for lab, t in zip(labels, truth)]))
-    return RunResult(labels, truth, acc, _miou(objects, labels, truth, world), len(objects), fusion_ms, summary)
+    return RunResult(labels, truth, acc, _miou(objects, labels, truth, world), len(objects), fusion_ms, summary,
+                     n_dets, n_map, box3d_ms, merge_ms)
+
+
+def _far_copy(det: Any, k: int) -> dict:
+    """A copy of detection ``det`` moved to grid cell ``k`` outside the room (2 m pitch from x = 10 m)."""
+    c = copy.deepcopy(dict(det))
+    shift = np.array([10.0 + 2.0 * (k % 32), 2.0 * (k // 32) - 32.0, 0.0])
+    c["pcd"].translate(shift)
+    c["bbox"].translate(shift)
+    # still "seen" at the source's frame (the backend needs a time step >= 0); a mask index no frame
+    # has and a path of their own keep the copies' fingerprints distinct and out of the accuracy
+    c["mask_idx"] = [10_000 + k]
+    c["color_path"] = [f"prepopulated-{k}"]
+    if "id" in c:  # ali-dev: a fresh uuid per object
+        c["id"] = uuid.uuid4()
+    return c
 
 
 class _null:  # noqa: N801
