@@ -366,17 +366,13 @@ def iter_events(
             except UnicodeDecodeError as exc:
                 err = FormatError(f"not UTF-8 text: byte 0x{braw[exc.start]:02x} at column {exc.start + 1}",
                                   path=path, line=lineno)
-                if not skip_bad_lines:
-                    raise err from None
-                _skip(st, err)
+                _skip(st, err, skip_bad_lines)
                 first = False
                 continue
             except (json.JSONDecodeError, RecursionError) as exc:
                 msg = f"{exc.msg} (column {exc.colno})" if isinstance(exc, json.JSONDecodeError) else "nested too deeply"
                 err = FormatError(f"bad JSON: {msg}", path=path, line=lineno)
-                if not skip_bad_lines:
-                    raise err from None
-                _skip(st, err)
+                _skip(st, err, skip_bad_lines)
                 first = False
                 continue
             if first:
@@ -389,25 +385,24 @@ def iter_events(
                 rec = _fast_check(obj)
             except _Bad:
                 err = FormatError(_pydantic_message(obj), path=path, line=lineno)
-                if not skip_bad_lines:
-                    raise err from None
-                _skip(st, err)
+                _skip(st, err, skip_bad_lines)
                 continue
             eid = rec.id
             if eid is not None:
                 if eid in seen_ids:
                     err = FormatError(f"field 'id': duplicate event id {eid!r} (ids must be unique within a log)",
                                       path=path, line=lineno)
-                    if not skip_bad_lines:
-                        raise err from None
-                    _skip(st, err)
+                    _skip(st, err, skip_bad_lines)
                     continue
                 seen_ids.add(eid)
             st.events += 1
             yield rec
 
 
-def _skip(st: ReadStats, err: FormatError) -> None:
+def _skip(st: ReadStats, err: FormatError, skip_bad_lines: bool) -> None:
+    """A bad line: raised unless ``skip_bad_lines``, else counted (and its message kept)."""
+    if not skip_bad_lines:
+        raise err from None
     st.skipped += 1
     if len(st.errors) < st.max_errors:
         st.errors.append(str(err))
