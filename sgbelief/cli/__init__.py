@@ -21,6 +21,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "import-cg": ("sgbelief.cli.import_cg", "import a saved ConceptGraphs map and replay its detections"),
     "inspect": ("sgbelief.cli.inspect", "show a saved graph's beliefs and provenance"),
     "vocab": ("sgbelief.cli.vocab", "check an open-vocabulary class list: what contradicts what"),
+    "show": ("sgbelief.cli.show", "draw a saved map top-down (PNG), or one element's belief trace"),
+    "record": ("sgbelief.cli.record", "replay an evidence log into a rerun recording (.rrd; sgbelief[rerun])"),
 }
 
 

@@ -39,6 +39,7 @@ from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES, make_
 from sgbelief.graph.belief import BetaBelief
 from sgbelief.graph.persistence import atomic_write_text
 from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.viz.trace_figure import draw_belief_band
 
 
 @dataclass(frozen=True)
@@ -281,8 +282,7 @@ def make_figures(results: dict[str, Any], out: Path, real: dict[str, Any], sim_c
         truth = tr.get("truth", 0)
         for name, color in _TRACE_COLOURS.items():
             arr = np.array(tr["trace"][name])
-            axes[0].plot(arr[:, 0], arr[:, 1], color=color, label=f"{name}: mean")
-            axes[0].fill_between(arr[:, 0], arr[:, 2], arr[:, 3], color=color, alpha=0.2, label=f"{name}: 90% interval")
+            draw_belief_band(axes[0], arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3], colour=color, name=name)
         for k in tr["contradictions"]:
             axes[0].axvline(k, color="0.85", lw=0.6, zorder=0)
         axes[0].axhline(0.5, color="0.5", ls=":", lw=1)
