@@ -61,7 +61,7 @@ def _panel_title(trace: BeliefTrace, tau: float) -> str:
     what = ", ".join(f"{n} {s}" for s, n in sorted(counts.items(), key=lambda kv: -kv[1]))
     verdict = "committed" if mean > tau else "not committed"
     n = len(trace.events)
-    return (f"{trace.predicate}: {n} event{"s" if n != 1 else ""} ({what}); now Beta({a:.2f}, {b:.2f}), "
+    return (f"{trace.predicate}: {n} event{'s' if n != 1 else ''} ({what}); now Beta({a:.2f}, {b:.2f}), "
             f"mean {mean:.3f}: {verdict}")
 
 
