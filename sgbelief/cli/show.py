@@ -94,7 +94,7 @@ def _trace(args: argparse.Namespace, graph: Any, title: str) -> Any:
 
 
 def _map(args: argparse.Namespace, graph: Any, title: str) -> Any:
-    from sgbelief.viz.map_figure import map_figure
+    from sgbelief.viz.map_figure import NoGeometryError, map_figure
     from sgbelief.viz.map_state import map_state
 
     boxes: dict[Any, Any] = {}
@@ -118,7 +118,13 @@ def _map(args: argparse.Namespace, graph: Any, title: str) -> Any:
         from sgbelief.errors import ConfigError
 
         raise ConfigError("--region: give XMIN XMAX YMIN YMAX with XMIN < XMAX and YMIN < YMAX")
-    fig = map_figure(state, title=title, region=region, ego_tracks=ego, max_strips=max(1, args.max_strips))
+    try:
+        fig = map_figure(state, title=title, region=region, ego_tracks=ego, max_strips=max(1, args.max_strips))
+    except NoGeometryError as exc:
+        if region is not None:
+            raise
+        raise NoGeometryError(f"{exc}; give the geometry with --nodes NODES_JSON (simulated logs: the nodes.json the "
+                              f"log came with) or --scannet SCENES (ScanNet maps)") from None
     missing = len(state.unlocated)
     if missing:
         print(f"note: {missing} of {len(state.objects)} objects have no box or centroid and are not drawn",

@@ -70,7 +70,7 @@ def _extent(fps: Sequence[_Footprint], ego: Sequence[EgoTrack]) -> Region:
     xs = [v for f in fps for v in (f.x0, f.x1)] + [p[0] for tr in ego for p in tr]
     ys = [v for f in fps for v in (f.y0, f.y1)] + [p[1] for tr in ego for p in tr]
     x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
-    pad = 0.05 * max(min(x1 - x0, y1 - y0), 1.0) + 0.2
+    pad = max(0.05 * min(x1 - x0, y1 - y0), 0.05)
     return x0 - pad, x1 + pad, y0 - pad, y1 + pad
 
 
@@ -116,10 +116,13 @@ def map_figure(state: MapState, *, title: str = "", region: Region | None = None
     letters = {s.node: chr(ord("A") + i) for i, s in enumerate(sites[:LETTERED_SITES])}
 
     caption = _caption(state, fps, sites, letters)
-    plot_w, legend_w = 10.0, 3.8  # inches: the panels, the legend beside them
-    heights = [min(8.0, max(0.8, (plot_w - 0.9) * (p[3] - p[2]) / (p[1] - p[0]))) for p in panels]
+    # inches: panels 9.1 wide (at most 8 high: a tall map gets narrower panels), the legend beside them
+    legend_w, axis_w = 3.8, 0.9
+    aspect = max((p[3] - p[2]) / (p[1] - p[0]) for p in panels)
+    panel_w = min(9.1, 8.0 / aspect)
+    heights = [max(0.8, panel_w * (p[3] - p[2]) / (p[1] - p[0])) for p in panels]
     caption_h = 0.16 * (caption.count("\n") + 1) + 0.1 if caption else 0.0
-    fig = plt.figure(figsize=(plot_w + legend_w, sum(heights) + 0.55 * len(panels) + 0.5 + caption_h),
+    fig = plt.figure(figsize=(max(panel_w + axis_w + legend_w, 9.0), sum(heights) + 0.55 * len(panels) + 0.5 + caption_h),
                      layout="constrained")
     grid = fig.add_gridspec(len(panels) + bool(caption), 1, height_ratios=heights + ([caption_h] if caption else []))
     max_site = max((s.claims for s in sites), default=1)
@@ -158,7 +161,7 @@ def _no_geometry_message(state: MapState, where: str) -> str:
     if not n:
         return "the map has no objects"
     return (f"none of the map's {n} objects has a box or a centroid{where}, so there is nothing to draw "
-            f"(replay --save-graph takes geometry from nodes.json (--nodes); for ScanNet maps pass --scannet SCENE_DIR)")
+            f"(node attributes 'bbox' or 'centroid', or boxes handed in)")
 
 
 def _draw_objects(ax: Any, fps: Sequence[_Footprint], colours: dict[str, str], tau: float, labelled: bool,
@@ -251,7 +254,8 @@ def _legend(fig: Any, state: MapState, shown: Sequence[ObjectView], colours: dic
     if sites:
         n = sum(s.claims for s in sites)
         handles.append(Line2D([], [], ls="", marker="o", ms=9, mfc="none", mec=REFUSED_COLOUR, mew=1.6,
-                              label=f"refused claims (⊥): {n} at {len(sites)} objects\n(ring area grows with the count)"))
+                              label=f"refused claims (⊥): {n} at {len(sites)} object{'s' if len(sites) > 1 else ''}\n"
+                                    "(ring area grows with the count)"))
     if ego:
         handles.append(Line2D([], [], color=EGO_COLOUR, marker="^", ms=6, label="ego trajectory (▲ start, ■ end)"))
     fig.legend(handles=handles, loc="outside right upper", fontsize=8, title=f"committed label (P > τ = {tau:g})", title_fontsize=8, frameon=False)
@@ -262,7 +266,7 @@ def _headline(title: str, state: MapState, shown: Sequence[ObjectView]) -> str:
     nodes = {o.node for o in shown}
     refused = sum(1 for c in state.refused if c.node in nodes)
     line = (f"{len(shown)} objects drawn, {committed} committed (P > τ = {state.tau:g}); "
-            f"{refused} refused claims (⊥) at them in the provenance")
+            + (f"{refused} refused claims (⊥) at them in the provenance" if refused else "no refused claims in the provenance"))
     if len(shown) < len(state.objects):
         line += f" (the whole map: {len(state.objects)} objects, {len(state.refused)} refused claims)"
     return f"{title}\n{line}" if title else line
