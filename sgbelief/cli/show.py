@@ -26,6 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--around", default=None, metavar="NODE",
                    help="draw the window of --radius metres around this node (default: the whole map)")
     p.add_argument("--radius", type=float, default=30.0, help="half-width of the --around window in metres (default: %(default)s)")
+    p.add_argument("--scene", default=None,
+                   help="draw only this scene's nodes (node attribute 'scene', else the id's part before '/'); "
+                        "default: the map's only scene, or its first one with a note when it holds several")
     p.add_argument("--nodes", type=Path, default=None,
                    help="nodes.json (simulator, bench): geometry for nodes the map lacks it for, and the ego "
                         "trajectory (default: the map's own node attributes only)")
@@ -97,13 +100,19 @@ def _map(args: argparse.Namespace, graph: Any, title: str) -> Any:
     from sgbelief.viz.map_figure import NoGeometryError, map_figure
     from sgbelief.viz.map_state import map_state
 
+    wanted = args.scene
+    if wanted is None and args.around is not None:  # the window lies in the frame of the node it is around
+        wanted = scene_of(graph, _node_id(graph, args.around))
+    chosen, scene = _scene_nodes(graph, wanted)
+    if scene is not None and args.title is None:
+        title += f" · scene {scene}"
     boxes: dict[Any, Any] = {}
     ego: list[list[tuple[float, float]]] = []
     if args.nodes is not None:
-        boxes, ego = _from_nodes_file(args.nodes, graph)
+        boxes, ego = _from_nodes_file(args.nodes, graph, chosen)
     if args.scannet is not None:
         boxes.update(_scannet_boxes(args.scannet))
-    state = map_state(graph, args.tau, boxes={n: b for n, b in boxes.items() if n in graph})
+    state = map_state(graph, args.tau, boxes={n: b for n, b in boxes.items() if n in graph}, nodes=chosen)
     region = tuple(args.region) if args.region is not None else None
     if args.around is not None:
         node = _node_id(graph, args.around)
@@ -132,8 +141,38 @@ def _map(args: argparse.Namespace, graph: Any, title: str) -> Any:
     return fig
 
 
-def _from_nodes_file(path: Path, graph: Any) -> tuple[dict[Any, Any], list[list[tuple[float, float]]]]:
-    """Boxes of the nodes.json nodes whose graph node has none, and the ego track of every scene."""
+def scene_of(graph: Any, node: Any) -> str | None:
+    """A node's scene: its ``scene`` attribute, else the part of a string id before its first '/'."""
+    scene = (graph.find_node(node) or {}).get("scene")
+    if scene is not None:
+        return str(scene)
+    return node.split("/", 1)[0] if isinstance(node, str) and "/" in node else None
+
+
+def _scene_nodes(graph: Any, wanted: str | None) -> tuple[list[Any] | None, str | None]:
+    """(the nodes to draw, the scene drawn): every node of a one-scene map (None, None), else those
+    of ``wanted`` (default: the first scene)."""
+    from sgbelief.errors import ConfigError
+
+    by_scene: dict[str | None, list[Any]] = {}
+    for n in graph.nodes():
+        by_scene.setdefault(scene_of(graph, n), []).append(n)
+    names = sorted((s for s in by_scene if s is not None))
+    if wanted is not None:
+        if wanted not in by_scene:
+            raise ConfigError(f"--scene: no node of the map belongs to scene {wanted!r}; its scenes: "
+                              f"{', '.join(names[:20]) or '(none named)'}{' ...' if len(names) > 20 else ''}")
+        return by_scene[wanted], wanted
+    if len(by_scene) <= 1:
+        return None, None
+    first = names[0]
+    print(f"note: the map holds {len(names)} scenes ({', '.join(names[:6])}{', ...' if len(names) > 6 else ''}), each in "
+          f"its own frame; drawing {first} (--scene NAME draws another)", file=sys.stderr)
+    return by_scene[first] + by_scene.get(None, []), first
+
+
+def _from_nodes_file(path: Path, graph: Any, chosen: list[Any] | None) -> tuple[dict[Any, Any], list[list[tuple[float, float]]]]:
+    """Boxes of the nodes.json nodes whose graph node has none, and the ego track of the scenes drawn."""
     from sgbelief.eval.formats import read_nodes
 
     doc = read_nodes(path)
@@ -142,8 +181,8 @@ def _from_nodes_file(path: Path, graph: Any) -> tuple[dict[Any, Any], list[list[
         attrs = graph.find_node(nid)
         if attrs is not None and attrs.get("bbox") is None:
             boxes[nid] = (tuple(info.bbox_min), tuple(info.bbox_max))
-    scenes = {a.get("scene") for n in graph.nodes() if (a := graph.find_node(n))} | {
-        info.scene for nid, info in doc.nodes.items() if nid in graph}
+    drawn = graph.nodes() if chosen is None else chosen
+    scenes = {scene_of(graph, n) for n in drawn} | {doc.nodes[n].scene for n in drawn if n in doc.nodes}
     ego = [[(p[1], p[2]) for p in sc.ego_track] for name, sc in doc.scenes.items() if name in scenes and sc.ego_track]
     return boxes, ego
 

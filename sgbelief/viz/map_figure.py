@@ -109,10 +109,13 @@ def map_figure(state: MapState, *, title: str = "", region: Region | None = None
         where = f" inside x {region[0]:g}..{region[1]:g}, y {region[2]:g}..{region[3]:g} m" if region else ""
         raise NoGeometryError(_no_geometry_message(state, where))
     shown = {f.obj.node for f in fps}
-    full = region if region is not None else _extent(fps, ego_tracks)
+    full = _extent(fps, ego_tracks)
+    if region is not None:  # the window, cut to what is drawn in it
+        full = (max(full[0], region[0]), min(full[1], region[1]), max(full[2], region[2]), min(full[3], region[3]))
     panels = _strips(full, max_strips)
     colours = label_colours(state.predicates + tuple(o.label for o in state.objects if o.label))
-    sites = [s for s in state.sites() if s.node in shown]
+    sites = [s for s in state.sites() if s.node in shown
+             and full[0] <= s.position[0] <= full[1] and full[2] <= s.position[1] <= full[3]]
     letters = {s.node: chr(ord("A") + i) for i, s in enumerate(sites[:LETTERED_SITES])}
 
     caption = _caption(state, fps, sites, letters)
@@ -148,7 +151,7 @@ def map_figure(state: MapState, *, title: str = "", region: Region | None = None
     assert ax is not None
     ax.set_xlabel("x [m]")
     _legend(fig, state, [f.obj for f in fps], colours, sites, bool(ego_tracks))
-    fig.suptitle(_headline(title, state, [f.obj for f in fps]), fontsize=10, ha="left", x=0.01)
+    fig.suptitle(_headline(title, state, [f.obj for f in fps], sites), fontsize=10, ha="left", x=0.01)
     if caption:
         cap = fig.add_subplot(grid[len(panels), 0])
         cap.axis("off")
@@ -189,7 +192,7 @@ def _draw_objects(ax: Any, fps: Sequence[_Footprint], colours: dict[str, str], t
             ax.plot([p[1] for p in o.track], [p[2] for p in o.track], color=edge, lw=0.7, alpha=0.7)
         if labelled:
             p = format_probability(o.probability, tau)
-            text = f"{display_name(o.label)} {p}" if o.label else (f"({p})" if o.has_evidence else "")
+            text = f"{display_name(o.label)} {p}" if o.label else (f"? {p}" if o.has_evidence else "")
             if text:
                 # below a refused site's ring, not on it
                 ax.annotate(text, (0.5 * (f.x0 + f.x1), 0.5 * (f.y0 + f.y1)), xytext=(0, -13 if o.node in ringed else 0),
@@ -216,7 +219,7 @@ def _draw_sites(ax: Any, sites: Sequence[RefusedSite], letters: dict[Any, str], 
     for s in sites:
         if s.node in letters:
             k = ord(letters[s.node]) - ord("A")  # neighbouring sites: letters on different sides
-            offset = ((8, 8), (-18, 8), (8, -20), (-18, -20))[k % 4]
+            offset = ((8, 8), (-18, 8), (8, 20), (-18, 20))[k % 4]  # above: object labels sit below rings
             ax.annotate(letters[s.node], (s.position[0], s.position[1]), xytext=offset, textcoords="offset points",
                         fontsize=10, fontweight="bold", color=REFUSED_COLOUR, zorder=6,
                         bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": REFUSED_COLOUR, "lw": 0.8})
@@ -245,7 +248,7 @@ def _legend(fig: Any, state: MapState, shown: Sequence[ObjectView], colours: dic
     untouched = sum(1 for o in shown if not o.has_evidence)
     if uncommitted:
         handles.append(Patch(facecolor=(*_rgb(UNCOMMITTED_COLOUR), 0.45), edgecolor=UNCOMMITTED_COLOUR,
-                             label=f"uncommitted: no P > τ ({uncommitted})"))
+                             label=f"uncommitted: no P > τ ({uncommitted});\n'? P' gives its highest P"))
     if untouched:
         handles.append(Patch(facecolor="none", edgecolor=NO_EVIDENCE_COLOUR, ls="--", label=f"no evidence ({untouched})"))
     tau = state.tau
@@ -261,14 +264,16 @@ def _legend(fig: Any, state: MapState, shown: Sequence[ObjectView], colours: dic
     fig.legend(handles=handles, loc="outside right upper", fontsize=8, title=f"committed label (P > τ = {tau:g})", title_fontsize=8, frameon=False)
 
 
-def _headline(title: str, state: MapState, shown: Sequence[ObjectView]) -> str:
+def _headline(title: str, state: MapState, shown: Sequence[ObjectView], sites: Sequence[RefusedSite]) -> str:
     committed = sum(1 for o in shown if o.label is not None)
-    nodes = {o.node for o in shown}
-    refused = sum(1 for c in state.refused if c.node in nodes)
+    refused = sum(s.claims for s in sites)
     line = (f"{len(shown)} objects drawn, {committed} committed (P > τ = {state.tau:g}); "
-            + (f"{refused} refused claims (⊥) at them in the provenance" if refused else "no refused claims in the provenance"))
+            + (f"{refused} refused claims (⊥) in view" if refused else "no refused claims in view"))
     if len(shown) < len(state.objects):
-        line += f" (the whole map: {len(state.objects)} objects, {len(state.refused)} refused claims)"
+        line += f" (of {len(state.objects)} objects and {len(state.refused)} refused claims in all)"
+    if state.folded:
+        line += (f"\ncompaction folded {state.folded} older entries of these objects (up to t = {state.folded_until}) "
+                 f"into buckets: refusals among them are no longer in the provenance")
     return f"{title}\n{line}" if title else line
 
 

@@ -8,7 +8,8 @@ predicate above tau is *uncommitted*; one that no claim has touched has *no evid
 For every refused claim (a ⊥ verdict: an entry of the refusal family in the provenance, still
 pending in Q⊥ or closed since as resolved / expired / dismissed): its pair, its time and the
 object's position at that time (the object's track when it moves, else its centroid). What
-compaction folded away is no longer in the provenance and is not shown.
+compaction folded away is no longer in the provenance and is not shown; :func:`folded_history`
+says how much that is.
 """
 
 from __future__ import annotations
@@ -102,6 +103,8 @@ class MapState:
     refused: tuple[RefusedClaim, ...]
     tau: float
     predicates: tuple[str, ...]  #: the predicates whose colours the legend assigns (sorted)
+    folded: int = 0  #: entries of these objects that compaction folded into buckets (their refusals are gone)
+    folded_until: int | None = None  #: the latest time such a bucket covers
 
     @property
     def located(self) -> list[ObjectView]:
@@ -210,6 +213,18 @@ def refused_sites(claims: Iterable[RefusedClaim]) -> list[RefusedSite]:
     return sites
 
 
+def folded_history(graph: SceneGraph, nodes: Iterable[Any] | None = None) -> tuple[int, int | None]:
+    """(entries folded into compacted buckets, the latest time a bucket covers) at ``nodes``
+    (default: every node): how much history a picture of the map can no longer show."""
+    wanted = None if nodes is None else set(nodes)
+    folded, until = 0, None
+    for e in graph.provenance.iter_entries():
+        if e.alive and e.status.value == "compacted" and (wanted is None or e.node in wanted):
+            folded += max(1, int(e.n_folded or 1))
+            until = e.t if until is None else max(until, e.t)
+    return folded, until
+
+
 def map_state(graph: SceneGraph, tau: float = 0.5, *, boxes: Mapping[Any, Box] | None = None,
               nodes: Iterable[Any] | None = None) -> MapState:
     """The picture's content for ``graph`` (every node, or ``nodes``); ``boxes`` (node -> box, e.g.
@@ -220,4 +235,5 @@ def map_state(graph: SceneGraph, tau: float = 0.5, *, boxes: Mapping[Any, Box] |
     by_node = {o.node: o for o in objects}
     refused = [c for c in refused_claims(graph, by_node) if c.node in by_node]
     preds = sorted(graph.vocabulary) if graph.vocabulary else graph.predicates()
-    return MapState(objects, tuple(refused), tau, tuple(sorted(preds)))
+    folded, until = folded_history(graph, by_node)
+    return MapState(objects, tuple(refused), tau, tuple(sorted(preds)), folded, until)
