@@ -267,3 +267,27 @@ def test_show_cli_on_a_conceptgraphs_map(tmp_path: Path, capsys: pytest.CaptureF
         assert len(objs) == 2 and all(type(p).__name__ == "Rectangle" for p in objs)
     finally:
         plt.close(fig)
+
+
+def test_show_draws_one_scene_of_a_multi_scene_map(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from sgbelief.viz.map_state import nodes_by_scene, scene_of
+
+    g = SceneGraph()
+    g.add_node("a/1", bbox=((0, 0, 0), (1, 1, 1)))
+    g.add_node("b/1", bbox=((0, 0, 0), (2, 2, 1)))
+    g.add_node("x", scene="c", centroid=(1, 1, 1))  # the attribute wins over the id
+    g.provenance.commit("b/1", "is_car", "e", 0, 3.0, 0.0)
+    g.save(tmp_path / "m")
+    assert [scene_of(g, n) for n in ("a/1", "b/1", "x")] == ["a", "b", "c"]
+    assert nodes_by_scene(g) == {"a": ["a/1"], "b": ["b/1"], "c": ["x"]}
+    assert main(["show", str(tmp_path / "m"), "--out", str(tmp_path / "1.png")]) == 0
+    assert "the map holds 3 scenes (a, b, c)" in capsys.readouterr().err
+    assert main(["show", str(tmp_path / "m"), "--around", "b/1", "--out", str(tmp_path / "2.png")]) == 0
+    assert "scenes" not in capsys.readouterr().err  # --around: the node's own scene
+    assert main(["show", str(tmp_path / "m"), "--scene", "zz", "--out", str(tmp_path / "3.png")]) == 1
+    assert "--scene: no node of the map belongs to scene 'zz'; its scenes: a, b, c" in capsys.readouterr().err
+    fig = map_figure(map_state(g, nodes=nodes_by_scene(g)["b"]))
+    try:
+        assert len(_objects(fig)) == 1
+    finally:
+        plt.close(fig)

@@ -98,7 +98,7 @@ def _trace(args: argparse.Namespace, graph: Any, title: str) -> Any:
 
 def _map(args: argparse.Namespace, graph: Any, title: str) -> Any:
     from sgbelief.viz.map_figure import NoGeometryError, map_figure
-    from sgbelief.viz.map_state import map_state
+    from sgbelief.viz.map_state import map_state, scene_of
 
     wanted = args.scene
     if wanted is None and args.around is not None:  # the window lies in the frame of the node it is around
@@ -141,22 +141,13 @@ def _map(args: argparse.Namespace, graph: Any, title: str) -> Any:
     return fig
 
 
-def scene_of(graph: Any, node: Any) -> str | None:
-    """A node's scene: its ``scene`` attribute, else the part of a string id before its first '/'."""
-    scene = (graph.find_node(node) or {}).get("scene")
-    if scene is not None:
-        return str(scene)
-    return node.split("/", 1)[0] if isinstance(node, str) and "/" in node else None
-
-
 def _scene_nodes(graph: Any, wanted: str | None) -> tuple[list[Any] | None, str | None]:
     """(the nodes to draw, the scene drawn): every node of a one-scene map (None, None), else those
     of ``wanted`` (default: the first scene)."""
     from sgbelief.errors import ConfigError
+    from sgbelief.viz.map_state import nodes_by_scene
 
-    by_scene: dict[str | None, list[Any]] = {}
-    for n in graph.nodes():
-        by_scene.setdefault(scene_of(graph, n), []).append(n)
+    by_scene = nodes_by_scene(graph)
     names = sorted((s for s in by_scene if s is not None))
     if wanted is not None:
         if wanted not in by_scene:
@@ -174,6 +165,7 @@ def _scene_nodes(graph: Any, wanted: str | None) -> tuple[list[Any] | None, str 
 def _from_nodes_file(path: Path, graph: Any, chosen: list[Any] | None) -> tuple[dict[Any, Any], list[list[tuple[float, float]]]]:
     """Boxes of the nodes.json nodes whose graph node has none, and the ego track of the scenes drawn."""
     from sgbelief.eval.formats import read_nodes
+    from sgbelief.viz.map_state import scene_of
 
     doc = read_nodes(path)
     boxes = {}

@@ -213,6 +213,23 @@ def refused_sites(claims: Iterable[RefusedClaim]) -> list[RefusedSite]:
     return sites
 
 
+def scene_of(graph: SceneGraph, node: Any) -> str | None:
+    """A node's scene: its ``scene`` attribute, else the part of a string id before its first ``/``
+    (``d04/0056``, ``scene0000_00/3``), else None. Scenes have their own frames: a picture shows one."""
+    scene = (graph.find_node(node) or {}).get("scene")
+    if scene is not None:
+        return str(scene)
+    return node.split("/", 1)[0] if isinstance(node, str) and "/" in node else None
+
+
+def nodes_by_scene(graph: SceneGraph) -> dict[str | None, list[Any]]:
+    """scene -> its nodes (in graph order); nodes without a scene under None."""
+    out: dict[str | None, list[Any]] = {}
+    for n in graph.nodes():
+        out.setdefault(scene_of(graph, n), []).append(n)
+    return out
+
+
 def folded_history(graph: SceneGraph, nodes: Iterable[Any] | None = None) -> tuple[int, int | None]:
     """(entries folded into compacted buckets, the latest time a bucket covers) at ``nodes``
     (default: every node): how much history a picture of the map can no longer show."""
