@@ -15,7 +15,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="PNG to write (default: map.png, or trace.png with --node)")
     p.add_argument("--node", default=None,
                    help="draw this node's belief trace over time (posterior mean, 90%% interval, one marker per "
-                        "event) instead of the map")
+                        "event) instead of the map (default: draw the map)")
     p.add_argument("--predicate", default=None,
                    help="with --node: comma-separated predicates to trace (default: those with evidence, the most "
                         "eventful first, at most 6)")
