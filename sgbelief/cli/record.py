@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import sys
+import logging
 import time
 from pathlib import Path
 from typing import Any
+
+from sgbelief.cli import _console as console
+
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -51,8 +55,8 @@ def run(args: argparse.Namespace) -> int:
     if args.nodes is not None or nodes_file.is_file():
         ego = _add_geometry(graph, nodes_file)
     else:
-        print(f"note: no nodes.json beside {args.events}: objects have no boxes in the recording, only belief series "
-              f"(--nodes gives one)", file=sys.stderr)
+        log.warning("no nodes.json beside %s: objects have no boxes in the recording, only belief series "
+                    "(--nodes gives one)", args.events)
 
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rec = rr.RecordingStream(f"sgbelief {args.operator}", recording_id=f"{args.events}:{args.operator}")
@@ -63,11 +67,7 @@ def run(args: argparse.Namespace) -> int:
     if ego:
         logger.log_ego_track([p[1:] for p in ego])
     stats = ReadStats()
-    progress = None
-    if not args.no_progress and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        progress = tqdm(desc="record", unit="ev", file=sys.stderr)
+    progress = console.progress(desc="record", unit="ev", quiet=args.no_progress)
     try:
         _replay_into(logger, run_, iter_events(args.events, skip_bad_lines=args.skip_bad_lines, stats=stats), stats,
                      args.events, ego, progress)
@@ -78,8 +78,7 @@ def run(args: argparse.Namespace) -> int:
         tmp.unlink(missing_ok=True)
         raise
     finally:
-        if progress is not None:
-            progress.close()
+        progress.close()
     rec.disconnect()
     tmp.replace(args.out)
     refused = dict(getattr(run_.operator, "stats", {}) or {}).get("refused", 0)
@@ -161,7 +160,6 @@ def _replay_into(logger: Any, run_: Any, records: Any, stats: Any, source: Path,
             if res.node in graph:
                 touched[res.node] = None
                 pairs[(res.node, res.predicate)] = None
-        if progress is not None:
-            progress.update(1)
+        progress.update(1)
     if last_t is not None:
         flush(last_t)

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import sys
+import logging
 from pathlib import Path
 from typing import Any
+
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -136,8 +138,7 @@ def _map(args: argparse.Namespace, graph: Any, title: str) -> Any:
                               f"log came with) or --scannet SCENES (ScanNet maps)") from None
     missing = len(state.unlocated)
     if missing:
-        print(f"note: {missing} of {len(state.objects)} objects have no box or centroid and are not drawn",
-              file=sys.stderr)
+        log.warning("%d of %d objects have no box or centroid and are not drawn", missing, len(state.objects))
     return fig
 
 
@@ -157,8 +158,8 @@ def _scene_nodes(graph: Any, wanted: str | None) -> tuple[list[Any] | None, str 
     if len(by_scene) <= 1:
         return None, None
     first = names[0]
-    print(f"note: the map holds {len(names)} scenes ({', '.join(names[:6])}{', ...' if len(names) > 6 else ''}), each in "
-          f"its own frame; drawing {first} (--scene NAME draws another)", file=sys.stderr)
+    log.warning("the map holds %d scenes (%s%s), each in its own frame; drawing %s (--scene NAME draws another)",
+                len(names), ", ".join(names[:6]), ", ..." if len(names) > 6 else "", first)
     return by_scene[first] + by_scene.get(None, []), first
 
 
