@@ -38,7 +38,7 @@ from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES, make_operator
 from sgbelief.graph.belief import BetaBelief
 from sgbelief.graph.persistence import atomic_write_text
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.api.scene_graph import SceneGraph
 
 
 @dataclass(frozen=True)
