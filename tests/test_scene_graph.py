@@ -172,3 +172,16 @@ def test_probabilities_is_probability_per_node() -> None:
 
     with pytest.raises(UnknownNodeError):
         g.node_attrs(["unhashable"])  # type: ignore[arg-type]
+
+
+def test_bulk_reads_over_the_whole_map() -> None:
+    g = SceneGraph(vocabulary={"is_car"})
+    for n in ("a", "b", 7):
+        g.add_node(n, label=str(n))
+    g.provenance.record(7, "is_car", "e1", 0, 2.0, 0.5)
+    table = g.node_attr_table()
+    assert list(table) == g.nodes() and all(table[n] is g.node_attrs(n) for n in g.nodes())  # live dicts
+    assert g.probabilities(None, "is_car") == [g.probability(n, "is_car") for n in g.nodes()]
+    with pytest.raises(UnknownPredicateError):
+        g.probabilities(None, "is_boat")
+    assert SceneGraph().probabilities(None, "anything") == []  # no node: nothing is checked

@@ -124,6 +124,12 @@ class SceneGraph:
         except (KeyError, TypeError, nx.NetworkXError):  # absent, unhashable, or a slice
             raise UnknownNodeError(node) from None
 
+    def node_attr_table(self) -> dict[NodeId, dict[str, Any]]:
+        """Every node's attribute dict (live), by node in the order of :meth:`nodes`: the bulk form
+        of :meth:`node_attrs` that reads over the whole map make (a subclass that changes what
+        one returns changes the other with it)."""
+        return dict(self.nx.nodes(data=True))
+
     def find_node(self, node: object) -> dict[str, Any] | None:
         """The node's attribute dict, or None when absent."""
         return self.nx.nodes[node] if node in self.nx else None
@@ -175,12 +181,18 @@ class SceneGraph:
         self.check_predicate(predicate)
         return self.provenance.mean(node, predicate)
 
-    def probabilities(self, nodes: Iterable[NodeId], predicate: str) -> list[float]:
+    def probabilities(self, nodes: Iterable[NodeId] | None, predicate: str) -> list[float]:
         """:meth:`probability` of each node, in order, with the same checks and errors (the
-        predicate checked once): the bulk read a query over many nodes makes.
+        predicate checked once): the bulk read a query over many nodes makes. ``nodes=None``:
+        every node of the graph, in the order of :meth:`nodes`.
 
         Both read the posterior means of the provenance store; a subclass that changes what
         :meth:`probability` returns changes this bulk form with it."""
+        if nodes is None:
+            every = self.nodes()
+            if every:
+                self.check_predicate(predicate)
+            return self.provenance.means(every, predicate)
         nodes = list(nodes)
         if not nodes:
             return []
