@@ -38,6 +38,9 @@ def normalise_class_name(name: str) -> str:
     return re.sub(r"[^0-9a-z]+", "_", name.strip().lower()).strip("_")
 
 
+#: where the deprecated ``SubsumptionTable.from_class_list`` lives now (module, name)
+_FROM_CLASS_LIST_HOME = ("sgbelief.fusion.open_vocab", "derive_table")
+
 VOCABULARY_FORMAT = "sgbelief.vocabulary"
 VOCABULARY_VERSION = 1
 
@@ -175,10 +178,11 @@ class SubsumptionTable:
                         ignore: Iterable[str] = (), name: str | None = None) -> SubsumptionTable:
         """Deprecated: :func:`sgbelief.fusion.open_vocab.derive_table` (same arguments), which
         derives a table from a detector class list, a taxonomy and an optional label mapping."""
-        warnings.warn("SubsumptionTable.from_class_list is deprecated; use sgbelief.fusion.open_vocab.derive_table",
+        home, name_there = _FROM_CLASS_LIST_HOME
+        warnings.warn(f"SubsumptionTable.from_class_list is deprecated; use {home}.{name_there}",
                       DeprecationWarning, stacklevel=2)
-        derive_table = importlib.import_module("sgbelief.fusion.open_vocab").derive_table
-        return derive_table(classes, taxonomy, mapping, ignore=ignore, name=name)  # type: ignore[no-any-return]
+        derive = getattr(importlib.import_module(home), name_there)  # a deprecated alias: no import arrow
+        return derive(classes, taxonomy, mapping, ignore=ignore, name=name)  # type: ignore[no-any-return]
 
     @classmethod
     def shipped(cls, name: str) -> SubsumptionTable:
