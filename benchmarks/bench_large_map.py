@@ -124,7 +124,7 @@ def main() -> int:
 
     from sgbelief.eval.batched import EventColumns, batched_replay
     from sgbelief.fusion.compatibility import SubsumptionTable
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief import SceneGraph
     from sgbelief.query import QueryEngine, named_queries
 
     wall0 = time.perf_counter()

@@ -10,14 +10,14 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.1.0"
+from sgbelief.version import __version__
 
 # public name -> module that defines it
 _EXPORTS: dict[str, str] = {
     "BetaBelief": "sgbelief.graph.belief",
     "ProvenanceStore": "sgbelief.graph.provenance",
     "EntryStatus": "sgbelief.graph.provenance",
-    "SceneGraph": "sgbelief.graph.scene_graph",
+    "SceneGraph": "sgbelief.api.scene_graph",
     "EvidenceEvent": "sgbelief.fusion.events",
     "GeometricChannel": "sgbelief.fusion.channel",
     "RecordedChannel": "sgbelief.fusion.channel",
@@ -55,4 +55,4 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator
     from sgbelief.graph.belief import BetaBelief
     from sgbelief.graph.provenance import EntryStatus, ProvenanceStore
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.api.scene_graph import SceneGraph

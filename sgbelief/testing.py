@@ -22,7 +22,7 @@ from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.events import EvidenceEvent
 from sgbelief.fusion.protocol import Action, FusionOperator, UpdateReport
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.api.scene_graph import SceneGraph
 
 _LABELS = ("car", "truck", "person", "building", None)
 

@@ -24,7 +24,7 @@ from sgbelief.fusion.registry import make_operator
 from sgbelief.graph.binary import FORMAT, graph_to_arrays, load_graph_npz
 from sgbelief.graph.persistence import graph_to_dict
 from sgbelief.graph.provenance import EntryStatus
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief import SceneGraph
 from sgbelief.testing import conformance_table, random_stream
 
 

@@ -15,7 +15,7 @@ from sgbelief.errors import RetractionError
 from sgbelief.eval.batched import provenance_signature
 from sgbelief.graph import provenance
 from sgbelief.graph.provenance import EntryStatus
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief import SceneGraph
 
 _NODES = ["a", "b", "c"]
 _PREDS = ["is_p", "is_q"]

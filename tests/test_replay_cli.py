@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from sgbelief.cli import main
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief import SceneGraph
 
 
 def _write_stream(d: Path, bad_line: str | None = None) -> tuple[Path, Path]:

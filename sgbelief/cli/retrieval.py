@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sgbelief.query.retrieval import RetrievalSource, evaluate_retrieval, evaluate_sources, format_scores
+    from sgbelief.eval.retrieval import RetrievalSource, evaluate_retrieval, evaluate_sources, format_scores
 
     if bool(args.scenes) == bool(args.suite):
         print("sgbelief retrieval: error: give either --scenes (with --events) or --suite", file=sys.stderr)

@@ -42,7 +42,7 @@ from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig, resolve_config
 from sgbelief.gc_tuning import relaxed_gc
 from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore, _PairLog
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.api.scene_graph import SceneGraph
 
 BATCHED_OPERATORS = ("majority", "naive_bayes", "overwrite")
 

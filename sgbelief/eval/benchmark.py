@@ -38,7 +38,7 @@ from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES, make_operator
 from sgbelief.graph.belief import BetaBelief
 from sgbelief.graph.persistence import atomic_write_text
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.api.scene_graph import SceneGraph
 from sgbelief.viz.trace_figure import draw_belief_band
 
 
@@ -448,7 +448,7 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
     if job.retrieval:
         progress(f"{name}: compound-query retrieval")
         try:
-            from sgbelief.query.retrieval import evaluate_retrieval, suite_retrieval_data
+            from sgbelief.eval.retrieval import evaluate_retrieval, suite_retrieval_data
 
             rdata = suite_retrieval_data(data_dir, spec.vocab)
             res["retrieval"] = [sc.to_dict() for sc in evaluate_retrieval(rdata, operators, operator_config=config)]

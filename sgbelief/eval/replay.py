@@ -25,7 +25,7 @@ from sgbelief.fusion.operators.base import BaseOperator
 from sgbelief.fusion.protocol import FusionOperator
 from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator
 from sgbelief.gc_tuning import relaxed_gc
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.api.scene_graph import SceneGraph
 
 
 @dataclass

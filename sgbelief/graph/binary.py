@@ -41,7 +41,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from sgbelief.errors import FormatError
-from sgbelief.graph.persistence import _jsonable, atomic_write_binary, restore_node_attr
+from sgbelief.graph.atomic_files import atomic_write_binary
+from sgbelief.graph.attr_values import jsonable, restore_node_attr
 from sgbelief.graph.provenance import (
     COUNTED,
     PENDING,
@@ -52,6 +53,7 @@ from sgbelief.graph.provenance import (
     index_event,
 )
 from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.version import __version__
 
 FORMAT = "sgbelief.scene_graph.npz"
 VERSION = 1
@@ -213,7 +215,7 @@ def _encode_values(values: list[Any], where: Callable[[int], str], special: str 
             i = int(np.flatnonzero(~finite)[0]) // max(math.prod(shape), 1)
             raise ValueError(f"{where(i)}: non-finite float in {values[i]!r} cannot be saved")
         return {"kind": "float", "shape": shape}, {"": arr}
-    texts = [json.dumps(_jsonable(v, where(i)), separators=(",", ":"), allow_nan=False) for i, v in enumerate(values)]
+    texts = [json.dumps(jsonable(v, where(i)), separators=(",", ":"), allow_nan=False) for i, v in enumerate(values)]
     return {"kind": "json"}, _encode_strings(texts, where)
 
 
@@ -544,8 +546,6 @@ def _positions(objs: Iterable[Any], sorted_ids: np.ndarray, order: np.ndarray) -
 def graph_to_arrays(graph: SceneGraph) -> dict[str, np.ndarray]:
     """The arrays of the binary layout (``header`` included). Raises TypeError / ValueError on
     values the format cannot hold (non-finite floats, unserialisable attributes, bad ids)."""
-    from sgbelief import __version__
-
     g = graph.nx
     prov = graph.provenance
     prov.materialize()  # the layout stores entries, the event index and the timeline
@@ -672,8 +672,8 @@ def graph_to_arrays(graph: SceneGraph) -> dict[str, np.ndarray]:
         "created_by": f"sgbelief {__version__}",
         "vocabulary": sorted(graph.vocabulary) if graph.vocabulary is not None else None,
         "clock": int(graph.clock),
-        "meta": _jsonable(graph.meta, "meta"),
-        "graph_attrs": _jsonable(dict(g.graph), "graph attributes"),
+        "meta": jsonable(graph.meta, "meta"),
+        "graph_attrs": jsonable(dict(g.graph), "graph attributes"),
         "prior": [prov.prior_alpha, prov.prior_beta],
         "remember_compacted": prov.remember_compacted,
         "n_compacted": prov.n_compacted,
@@ -857,9 +857,10 @@ def _segment_sums(x: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> np.
     return out
 
 
-def load_graph_npz(path: str | Path) -> SceneGraph:
-    """Read a graph written by :func:`save_graph_npz`; any malformed, truncated, edited or hostile
-    file raises FormatError naming the array or header field (and no graph is returned)."""
+def load_graph_npz(path: str | Path, *, cls: type[SceneGraph] = SceneGraph) -> Any:
+    """Read a graph written by :func:`save_graph_npz`, as an instance of ``cls`` (the model's
+    SceneGraph by default); any malformed, truncated, edited or hostile file raises FormatError
+    naming the array or header field (and no graph is returned)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no saved scene graph at {path}")
@@ -870,10 +871,10 @@ def load_graph_npz(path: str | Path) -> SceneGraph:
     if not isinstance(npz, np.lib.npyio.NpzFile):
         raise FormatError("a single .npy array, not an .npz scene graph archive", path=path)
     with npz, _young_collections_only():
-        return _load(_Archive(npz, path))
+        return _load(_Archive(npz, path), cls)
 
 
-def _load(arch: _Archive) -> SceneGraph:
+def _load(arch: _Archive, cls: type[SceneGraph]) -> SceneGraph:
     h = _read_header(arch)
     c = h.counts
     n, n_pairs, m = c.nodes, c.pairs, c.entries
@@ -971,7 +972,7 @@ def _load(arch: _Archive) -> SceneGraph:
     arch.check_unused()
     arch.check_unused()
     # ------------------------------------------------------------- build the graph
-    graph = SceneGraph(vocabulary=h.vocabulary)
+    graph = cls(vocabulary=h.vocabulary)
     graph.clock = h.clock
     graph.meta = dict(h.meta)
     g = graph.nx

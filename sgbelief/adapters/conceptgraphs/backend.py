@@ -122,7 +122,7 @@ class ConceptGraphsBackend:
         label_rule: str | Mapping[str, str] = "most_frequent",
     ) -> None:
         from sgbelief.fusion.channel import NullChannel
-        from sgbelief.graph.scene_graph import SceneGraph
+        from sgbelief.api.scene_graph import SceneGraph
 
         if isinstance(vocabulary, ClassVocabulary):
             self.vocabulary = vocabulary
@@ -560,7 +560,9 @@ class ConceptGraphsBackend:
 
     def save(self, path: str | Path) -> Path:
         """Save the belief graph (SceneGraph JSON)."""
-        return self.graph.save(path)
+        from sgbelief.graph.persistence import save_graph
+
+        return save_graph(self.graph, path)
 
 
 def _seq(value: Any) -> list[Any]:
