@@ -20,7 +20,7 @@ from sgbelief.cli import main  # noqa: E402
 from sgbelief.eval.formats import write_nodes  # noqa: E402
 from sgbelief.graph.persistence import load_graph  # noqa: E402
 from sgbelief.graph.provenance import EntryStatus  # noqa: E402
-from sgbelief.graph.scene_graph import SceneGraph  # noqa: E402
+from sgbelief.api.scene_graph import SceneGraph  # noqa: E402
 from sgbelief.viz.map_figure import OBJECT_GID, REFUSED_GID, NoGeometryError, map_figure  # noqa: E402
 from sgbelief.viz.map_state import map_state, object_view  # noqa: E402
 from sgbelief.viz.style import REFUSED_STATUSES, format_probability  # noqa: E402

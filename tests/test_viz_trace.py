@@ -16,7 +16,7 @@ from hypothesis import strategies as st  # noqa: E402
 from sgbelief.fusion.channel import FrameLabels  # noqa: E402
 from sgbelief.fusion.config import OperatorConfig  # noqa: E402
 from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator  # noqa: E402
-from sgbelief.graph.scene_graph import SceneGraph  # noqa: E402
+from sgbelief.api.scene_graph import SceneGraph  # noqa: E402
 from sgbelief.testing import conformance_table, random_stream  # noqa: E402
 from sgbelief.viz.trace import belief_trace  # noqa: E402
 from sgbelief.viz.trace_figure import EVENT_MARKERS_GID, draw_belief_band, trace_figure  # noqa: E402
