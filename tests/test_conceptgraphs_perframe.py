@@ -200,9 +200,7 @@ def _frame_opcodes_through_the_merge(generation: str, n_obj: int) -> Counter[str
     fns = make_functions(backend, generation, originals={"merge_obj2_into_obj1": keep})
     objs = [{"class_id": [o % 4], "conf": [0.8], "image_idx": [0], "mask_idx": [o], "class_name": [CLASSES[o % 4]],
              "id": f"obj-{o}"} for o in range(n_obj)]
-    for o in objs:
-        backend.ensure_node(o)
-    backend._synced_len = len(objs)
+    fns.sync_labels(objs)  # the map as a previous frame left it: every object registered
     det = {"class_id": [1], "conf": [0.9], "image_idx": [1], "mask_idx": [0], "class_name": [CLASSES[1]], "id": "det"}
     sims = torch.full((1, n_obj), float("-inf"))
     sims[0, 3] = 1.5

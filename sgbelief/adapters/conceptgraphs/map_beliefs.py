@@ -1,16 +1,16 @@
-"""ConceptGraphsBackend: belief fusion behind ConceptGraphs' mapping functions."""
+"""The belief bookkeeping behind the ConceptGraphs backend: map objects to nodes, detections to
+evidence events, beliefs to labels. Nothing here knows ConceptGraphs' function signatures or how
+they are swapped in (:mod:`.generation_main`, :mod:`.generation_ali_dev`, :mod:`.patching`)."""
 
 from __future__ import annotations
 
-import contextlib
-import gc
 from collections import Counter
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from pathlib import Path
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
 from sgbelief.adapters.conceptgraphs.identity import IdentityMap
 from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
 
@@ -76,13 +76,21 @@ class BackendSummary(NamedTuple):
     events: int  #: evidence entries in the graph
 
 
-class ConceptGraphsBackend:
-    """Routes every ConceptGraphs detection into a :class:`~sgbelief.graph.scene_graph.SceneGraph`.
+class MapBeliefs:
+    """The belief side of a ConceptGraphs map: which graph node each map object is, the evidence its
+    detections routed there, and the label the beliefs give it.
+
+    It takes resolved parts (an operator instance, a :class:`ClassVocabulary`, a scene graph);
+    :class:`~sgbelief.adapters.conceptgraphs.backend.ConceptGraphsBackend` builds them from names and
+    adds the installation into ConceptGraphs. The per-generation replacement functions
+    (:mod:`.generation_main`, :mod:`.generation_ali_dev`) call the methods below.
 
     Args:
-        operator: operator name (``comod``, ``cal``, ``majority``, ...) or a FusionOperator instance.
-        vocabulary: a :class:`ClassVocabulary`, a path to ``configs/conceptgraphs/*.yaml`` or None
-            (shipped ScanNet vocabulary).
+        operator: a FusionOperator instance.
+        vocabulary: the :class:`ClassVocabulary` mapping class names to predicates.
+        graph: the scene graph the beliefs live in.
+        seed_from_graph: the graph may already hold evidence the backend did not route (a graph
+            handed in by the caller): a node's pre-existing beliefs are read once, on first use.
         context: the context tag kappa (detector / VLM and prompt version) of every event.
         channel: optional geometric channel: a GeometricChannel (``label(node, t)``), or a callable
             ``fn(detection, node, t) -> str | None``.  A detection's own ``label_key`` entry wins.
@@ -92,8 +100,7 @@ class ConceptGraphsBackend:
         tau / tau_t: commit threshold and targeting-mass threshold (default: the operator config).
         on_filter: ``"mark"`` (node kept with ``cg_filtered=True``) or ``"remove"``.
         confidence_map: optional map of the detector's raw confidence before it enters an event.
-        gc_checkpoints: call :meth:`gc_checkpoint` once per frame (after the patched per-frame
-            merge), so CPython's full collections never rescan the whole map.
+        class_names: class names by class id (learned from the detections when absent).
         label_rule: the class written when the committed predicate covers several class names
             (``is_table_or_desk``: table, desk): ``"most_frequent"`` (default: the name detected most
             often on this object, ties to the first seen), ``"first"`` (the first name detected), or a
@@ -103,13 +110,13 @@ class ConceptGraphsBackend:
 
     def __init__(
         self,
-        operator: str | Any = "comod",
-        vocabulary: ClassVocabulary | str | Path | None = None,
+        operator: Any,
+        vocabulary: ClassVocabulary,
+        graph: Any,
+        *,
+        seed_from_graph: bool = False,
         context: str = "conceptgraphs",
         channel: Any = None,
-        *,
-        graph: Any = None,
-        operator_config: Any = None,
         label_key: str = DEFAULT_LABEL_KEY,
         unknown_label: str = "unknown",
         unknown_class_id: int = -1,
@@ -118,34 +125,21 @@ class ConceptGraphsBackend:
         on_filter: str = "mark",
         confidence_map: Callable[[float], float] | None = None,
         class_names: Sequence[str] | None = None,
-        gc_checkpoints: bool = False,
         label_rule: str | Mapping[str, str] = "most_frequent",
     ) -> None:
         from sgbelief.fusion.channel import NullChannel
-        from sgbelief.graph.scene_graph import SceneGraph
+        from sgbelief.fusion.operators.base import BaseOperator
 
-        if isinstance(vocabulary, ClassVocabulary):
-            self.vocabulary = vocabulary
-        elif vocabulary is None:
-            self.vocabulary = ClassVocabulary.default()
-        else:
-            self.vocabulary = ClassVocabulary.from_yaml(vocabulary)
-        self.table = self.vocabulary.table()
-        if isinstance(operator, str):
-            from sgbelief.fusion.registry import make_operator
-
-            self.operator = make_operator(operator, config=operator_config, vocabulary=self.table)
-            self.operator_name = operator
-        else:
-            self.operator = operator
-            self.operator_name = type(operator).__name__
-        cfg = getattr(self.operator, "config", None)
+        self.vocabulary = vocabulary
+        self.table = vocabulary.table()
+        self.operator = operator
+        cfg = getattr(operator, "config", None)
         self.tau = float(tau if tau is not None else getattr(cfg, "tau", 0.5))
         self.tau_t = float(tau_t if tau_t is not None else getattr(cfg, "tau_t", 0.1))
         self.context = context
-        self.graph = graph if graph is not None else SceneGraph()
+        self.graph = graph
         # a graph handed in may already hold evidence the backend did not route (see _predicates_of)
-        self._external_graph = graph is not None
+        self._external_graph = bool(seed_from_graph)
         self._null = NullChannel()
         self.channel_fn: DetectionLabelFn | None = None
         self.channel: Any = None
@@ -173,32 +167,21 @@ class ConceptGraphsBackend:
         self._detections_per_node: Counter[Any] = Counter()
         self._routed_detections = 0
         self._last_t = None
-        self._pending_targets: dict[int, dict[Any, float]] = {}
-        self._last_match: tuple[Any, Any, float] | None = None
-        #: list indices of the map objects a patched per-frame merge touched (their labels are re-read)
-        self._touched_idx: set[int] = set()
-        #: map-list length after the last label sync; objects appended beyond it by the script itself
-        #: (the first frame's ``extend``) are registered at the next per-frame merge
-        self._synced_len = 0
+        #: nodes whose beliefs may have changed since the last take_changed_nodes(): the targets of
+        #: routed events, the node a merge kept, and the nodes of queue resolutions
+        self._changed: set[Any] = set()
         self.reports: list[Any] = []
         self.keep_reports = False
-        self._patcher: Any = None
         self.active = True
-        self.gc_checkpoints = bool(gc_checkpoints)
-        self._froze = False
         if isinstance(label_rule, str):
             if label_rule not in ("most_frequent", "first"):
                 raise ValueError("label_rule must be 'most_frequent', 'first' or a mapping predicate -> class name")
             self.label_rule: str | dict[str, str] = label_rule
         else:
             self.label_rule = dict(label_rule)
-        from sgbelief.fusion.operators.base import BaseOperator
-
-        # sgbelief's own operators can skip building per-target reports nobody reads, and their
-        # probability is the belief mean (read straight from the provenance store)
-        self._lean_update = isinstance(self.operator, BaseOperator)
-        self._mean_is_probability = (self._lean_update
-                                     and type(self.operator).probability is BaseOperator.probability)
+        # sgbelief's own operators take report=False (no per-target reports nobody reads); any other
+        # FusionOperator gets the protocol's update(graph, event, channel)
+        self._skip_reports = isinstance(operator, BaseOperator)
 
     # ------------------------------------------------------------------ reading CG dicts
     def claims_of(self, obj: Mapping[str, Any]) -> list[Claim]:
@@ -248,7 +231,7 @@ class ConceptGraphsBackend:
         return node
 
     def _add_graph_node(self, node: Any, obj: Mapping[str, Any]) -> None:
-        centroid, bbox = _geometry_summary(obj)
+        centroid, bbox = geometry_summary(obj)
         if node in self.graph:
             return
         self.graph.add_node(node, centroid=centroid, bbox=bbox, source="conceptgraphs")
@@ -289,28 +272,49 @@ class ConceptGraphsBackend:
             else:
                 channel = _EventChannel(label, det, self.channel, self.channel_fn, k)
             if self._last_t is not None and claim.t > self._last_t:
-                self.operator.tick(self.graph, claim.t)
+                resolved = self.operator.tick(self.graph, claim.t)
+                if resolved:
+                    self._note_resolutions(resolved)
             self._last_t = claim.t if self._last_t is None else max(self._last_t, claim.t)
             event = EvidenceEvent(targets=targets, predicate=pred, confidence=float(conf),
                                   context=self.context, t=int(claim.t))
-            if self._lean_update and not self.keep_reports:
+            if self._skip_reports and not self.keep_reports:
                 report = self.operator.update(self.graph, event, channel, report=False)
             else:
                 report = self.operator.update(self.graph, event, channel)
+            if report.resolutions:
+                self._note_resolutions(report.resolutions)
             if self.keep_reports:
                 self.reports.append(report)
             n_events += 1
+        changed = self._changed
         for node in targets:
             self._detections_per_node[node] += len(claims)
+            changed.add(node)
         self._routed_detections += len(claims)
         return n_events
 
-    def targets_for(self, row: Any, best: int, objects: Sequence[dict], threshold: float) -> dict[Any, float]:
+    def _note_resolutions(self, resolutions: Iterable[Any]) -> None:
+        """A queued event left its queue (released, corroborated, ...): its node's beliefs may move."""
+        changed = self._changed
+        for res in resolutions:
+            changed.add(res.node)
+
+    def take_changed_nodes(self) -> set[Any]:
+        """Nodes whose beliefs may have changed since the previous call (then forgotten): targets of
+        routed events, nodes that absorbed a merge, nodes of queue resolutions. The per-frame merges
+        relabel exactly these, so a frame's label work follows its detections, not the map's size."""
+        changed, self._changed = self._changed, set()
+        return changed
+
+    def targets_for(self, row: Any, best: int, objects: Sequence[dict], threshold: float,
+                    touched: set[int] | None = None) -> dict[Any, float]:
         """Targeting distribution T for one detection from its row of association scores.
 
         Every object whose score is above ``threshold`` (finite scores when it is -inf) is a
         candidate; T(v) is proportional to max(score, 0) over the candidates, and the argmax
         alone gets mass 1 when no candidate has a positive score.  The caller drops T(v) <= tau_T.
+        ``touched``: the list positions of the targeted objects are added to it.
         """
         scores = np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float).ravel()
         n = min(len(scores), len(objects))
@@ -318,11 +322,12 @@ class ConceptGraphsBackend:
         # candidates found in numpy: the per-detection cost does not grow with the map's size
         cand = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0)).tolist()
         pos = {j: float(s[j]) for j in cand}
-        touched = self._touched_idx
         if len(pos) <= 1 or best not in pos:
-            touched.add(best)
+            if touched is not None:
+                touched.add(best)
             return {self.ensure_node(objects[best]): 1.0}
-        touched.update(pos)
+        if touched is not None:
+            touched.update(pos)
         total = sum(pos.values())
         out: dict[Any, float] = {}
         for j, s in pos.items():
@@ -354,13 +359,14 @@ class ConceptGraphsBackend:
         names.update(self._names_per_node.pop(raw, Counter()))
         self._preds_per_node.setdefault(keep, set()).update(self._preds_per_node.pop(raw, ()))
         self.identity.absorb(raw, keep)
+        self._changed.add(keep)
 
     def refresh_geometry(self, obj: Mapping[str, Any]) -> None:
         """Copy the object's current centroid / box into its node."""
         node = self.node_of(obj)
         if node is None or node not in self.graph:
             return
-        centroid, bbox = _geometry_summary(obj)
+        centroid, bbox = geometry_summary(obj)
         attrs = self.graph.nx.nodes[node]
         if centroid is not None:
             attrs["centroid"] = centroid
@@ -414,19 +420,14 @@ class ConceptGraphsBackend:
         return preds
 
     def committed_predicate(self, node: Any) -> str | None:
-        """The predicate with the highest committed probability (> tau), or None."""
+        """The predicate with the highest committed probability (> tau), or None.
+
+        The probability is the operator's (``FusionOperator.probability``), for every operator."""
         best, best_p = None, self.tau
-        preds = sorted(self._predicates_of(node))
-        if self._mean_is_probability:
-            alpha_beta = self.graph.provenance.alpha_beta
-            for pred in preds:
-                a, b = alpha_beta(node, pred)
-                p = a / (a + b)  # the belief mean, as ProvenanceStore.mean computes it
-                if p > best_p:
-                    best, best_p = pred, p
-            return best
-        for pred in preds:
-            p = float(self.operator.probability(self.graph, node, pred))
+        probability = self.operator.probability
+        graph = self.graph
+        for pred in sorted(self._predicates_of(node)):
+            p = float(probability(graph, node, pred))
             if p > best_p:
                 best, best_p = pred, p
         return best
@@ -457,12 +458,17 @@ class ConceptGraphsBackend:
                 best, best_n = key, n
         return best
 
+    def committed_class(self, node: Any) -> tuple[int | None, str] | None:
+        """(class id, class name) of the node's committed predicate under ``label_rule``, or None
+        when nothing commits."""
+        return self._class_for(node, self.committed_predicate(node))
+
     def label_of(self, obj: Mapping[str, Any]) -> str | None:
         """Class name from the beliefs (``unknown_label`` when nothing commits; None if unseen)."""
         node = self.node_of(obj)
         if node is None or node not in self.graph:
             return None
-        hit = self._class_for(node, self.committed_predicate(node))
+        hit = self.committed_class(node)
         return self.unknown_label if hit is None else hit[1]
 
     def class_id_of(self, obj: Mapping[str, Any]) -> int | None:
@@ -470,30 +476,17 @@ class ConceptGraphsBackend:
         node = self.node_of(obj)
         if node is None or node not in self.graph:
             return None
-        hit = self._class_for(node, self.committed_predicate(node))
+        hit = self.committed_class(node)
         if hit is None or hit[0] is None:
             return self.unknown_class_id
         return hit[0]
 
-    # ------------------------------------------------------------------ garbage collector
-    def gc_checkpoint(self) -> None:
-        """Collect the cyclic garbage made since the last checkpoint, then freeze what survives.
-
-        CPython's generation-2 collection re-traverses every tracked object; a map holds several per
-        provenance entry (live for T_prov steps), so its pauses grow with objects x history (about
-        3 s at 5,000 objects x 500 detections). Frozen objects (``gc.freeze()``) are skipped, and
-        reference counting still frees them; each checkpoint only scans what is new since the
-        previous one. Cycles that become garbage after being frozen wait for ``gc.unfreeze()``
-        (done by :meth:`uninstall`). See docs/performance.md, "ConceptGraphs per-frame cost".
-        """
-        gc.collect()
-        gc.freeze()
-        self._froze = True
-
+    # ------------------------------------------------------------------ per frame
     def end_frame(self) -> None:
-        """Called by the patched per-frame merge functions: the per-frame housekeeping hook."""
-        if self.gc_checkpoints:
-            self.gc_checkpoint()
+        """Called by the patched per-frame merge functions once per frame (after the merge).
+
+        Nothing to do for the bookkeeping itself; :class:`~sgbelief.adapters.conceptgraphs.backend.
+        ConceptGraphsBackend` adds its garbage-collector checkpoints here."""
 
     def summary(self, objects: Sequence[Mapping[str, Any]] | None = None) -> BackendSummary:
         """Counts of labelled and ``unknown`` objects (nothing commits), over ``objects`` (a map
@@ -505,7 +498,7 @@ class ConceptGraphsBackend:
         attrs = self.graph.nx.nodes
         filtered = sum(1 for n in nodes if attrs[n].get("cg_filtered"))
         live = [n for n in nodes if not attrs[n].get("cg_filtered")]
-        labelled = sum(1 for n in live if self._class_for(n, self.committed_predicate(n)) is not None)
+        labelled = sum(1 for n in live if self.committed_class(n) is not None)
         return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
                               filtered=filtered, detections=self._routed_detections,
                               events=self.evidence_count())
@@ -517,50 +510,6 @@ class ConceptGraphsBackend:
     def routed_detections(self) -> int:
         """Per-detection claims routed so far (each detection counted once)."""
         return self._routed_detections
-
-    # ------------------------------------------------------------------ functions & patching
-    def functions(self, generation: str = "main") -> Any:
-        """ConceptGraphs-signature functions for ``generation`` (``main`` or ``ali-dev``)."""
-        from sgbelief.adapters.conceptgraphs.functions import make_functions
-
-        return make_functions(self, generation)
-
-    def install(self, *modules: Any, generation: str | None = None, fix_list_kwargs: bool = True) -> None:
-        """Swap the belief-routing functions into ConceptGraphs' (already imported) modules."""
-        from sgbelief.adapters.conceptgraphs.patching import Patcher
-
-        if self._patcher is not None:
-            raise RuntimeError("backend already installed; call uninstall() first")
-        patcher = Patcher(self, extra_modules=modules, generation=generation, fix_list_kwargs=fix_list_kwargs)
-        patcher.install()
-        self._patcher = patcher
-        self.active = True
-
-    def uninstall(self) -> None:
-        """Restore every name swapped by :meth:`install` (and unfreeze what :meth:`gc_checkpoint` froze)."""
-        if self._patcher is not None:
-            self._patcher.uninstall()
-            self._patcher = None
-        if self._froze:
-            gc.unfreeze()
-            self._froze = False
-
-    @contextlib.contextmanager
-    def patch(self, *modules: Any, generation: str | None = None, fix_list_kwargs: bool = True) -> Iterator[ConceptGraphsBackend]:
-        """Context manager form of :meth:`install` / :meth:`uninstall`."""
-        self.install(*modules, generation=generation, fix_list_kwargs=fix_list_kwargs)
-        try:
-            yield self
-        finally:
-            self.uninstall()
-
-    @property
-    def generation(self) -> str | None:
-        return None if self._patcher is None else self._patcher.generation
-
-    def save(self, path: str | Path) -> Path:
-        """Save the belief graph (SceneGraph JSON)."""
-        return self.graph.save(path)
 
 
 def _seq(value: Any) -> list[Any]:
@@ -585,18 +534,3 @@ def _as_float(value: Any) -> float:
     if type(value) is float:
         return value
     return float(np.asarray(value).item())
-
-
-def _geometry_summary(obj: Mapping[str, Any]) -> tuple[Any, Any]:
-    pts = None
-    pcd = obj.get("pcd")
-    if pcd is not None and hasattr(pcd, "points"):
-        pts = np.asarray(pcd.points)
-    elif obj.get("pcd_np") is not None:
-        pts = np.asarray(obj["pcd_np"])
-    if pts is None or pts.size == 0:
-        return None, None
-    pts = pts.reshape(-1, 3)
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    centroid = tuple(float(x) for x in pts.mean(axis=0))
-    return centroid, (tuple(float(x) for x in lo), tuple(float(x) for x in hi))
