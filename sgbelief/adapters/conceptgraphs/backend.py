@@ -14,11 +14,17 @@ from pathlib import Path
 from typing import Any
 
 from sgbelief.adapters.conceptgraphs.functions import GenerationFunctions, make_functions
-from sgbelief.adapters.conceptgraphs.map_beliefs import DEFAULT_LABEL_KEY, BackendSummary, Claim, MapBeliefs
+from sgbelief.adapters.conceptgraphs.map_beliefs import (
+    DEFAULT_LABEL_KEY,
+    BackendSummary,
+    Claim,
+    DetectionLabelFn,
+    MapBeliefs,
+)
 from sgbelief.adapters.conceptgraphs.patching import Patcher
 from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
 
-__all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "ConceptGraphsBackend"]
+__all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "ConceptGraphsBackend", "DetectionLabelFn"]
 
 
 class ConceptGraphsBackend(MapBeliefs):
