@@ -359,6 +359,9 @@ def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 
     utils, mapping, slam_classes, gen = cg
     cfg = cg_config(path, gen)
     rng = np.random.default_rng(seed)
+    # ConceptGraphs draws from numpy's global generator (the point jitter of its depth back-projection,
+    # instance colours): seeded per run, every run of a seed sees the same points, in any process
+    np.random.seed(seed)
     feats = features(world)
     truth_of: dict[tuple[int, int], int] = {}
     ctx = backend.patch() if backend is not None else _null()

@@ -258,3 +258,57 @@ def test_patch_swaps_and_restores_every_binding():
 def test_stand_in_lists_accept_keywords():
     assert MapObjectList(device="cuda") == []
     assert DetectionList([1, 2], device="cpu") == [1, 2]
+
+
+# ---------------------------------------------------------------- relabel what changed
+class ReleasingOperator:
+    """A FusionOperator (protocol only, not a BaseOperator): majority vote, plus a queued batch of
+    claims on another node that ``tick`` releases at time ``at`` and reports as a QueueResolution."""
+
+    name = "releasing"
+
+    def __init__(self, node, predicate, at):
+        from sgbelief.fusion.registry import make_operator
+
+        self.inner = make_operator("majority")
+        self.held = (node, predicate, at)
+
+    def update(self, graph, event, channel=None):
+        return self.inner.update(graph, event, channel)
+
+    def probability(self, graph, node, predicate):
+        return self.inner.probability(graph, node, predicate)
+
+    def tick(self, graph, t):
+        from sgbelief.fusion.events import EvidenceEvent
+        from sgbelief.fusion.protocol import QueueResolution
+
+        out = list(self.inner.tick(graph, t))
+        if self.held is not None and t >= self.held[2]:
+            node, pred, _ = self.held
+            self.held = None
+            for k in range(3):
+                self.inner.update(graph, EvidenceEvent({node: 1.0}, pred, 0.99, "queue", t, id=f"held-{k}"))
+            out.append(QueueResolution("held-0", node, pred, "released", t))
+        return out
+
+
+def test_ali_dev_relabels_an_untouched_object_whose_beliefs_a_queue_release_changed():
+    a = make_detection(blob((0, 0, 0)), 0, "chair", 0.9, 0, generation="ali-dev", seed=1)
+    b = make_detection(blob((5, 0, 0)), 1, "table", 0.9, 0, mask_idx=1, generation="ali-dev", seed=2)
+    for key, value in (("class_id", 2), ("conf", np.float32(0.6)), ("image_idx", 0), ("mask_idx", 1)):
+        b[key].append(value)  # b's history: table at 0.9, then sofa at 0.6 (class names by id: CLASSES)
+    backend = ConceptGraphsBackend(ReleasingOperator(str(b["id"]), "is_sofa", at=1), class_names=CLASSES)
+    f = backend.functions("ali-dev")
+    objects = MapObjectList([a, b])
+    f.sync_labels(objects)
+    assert [o["class_name"] for o in objects] == ["chair", "table"]
+    # frame 1: one detection, on a only; the tick at t = 1 releases three sofa claims onto b
+    det = make_detection(blob((0, 0, 0)), 0, "chair", 0.9, 1, generation="ali-dev", seed=3)
+    sims = torch.tensor([[1.5, float("-inf")]])
+    objects = f.merge_obj_matches(DetectionList([det]), objects, f.match_detections_to_objects(sims, 1.1),
+                                  0.05, False, 0.1, 10, "iou", "cpu")
+    assert backend.label_of(objects[1]) == "sofa"
+    assert objects[1]["class_name"] == "sofa"  # relabelled though no detection touched it
+    objects[1]["class_name"] = "table"  # the script's vote write keeps the belief label
+    assert objects[1]["class_name"] == "sofa"

@@ -190,27 +190,33 @@ def test_gc_checkpoint_freezes_and_uninstall_unfreezes() -> None:
         gc.unfreeze()
 
 
-def _frame_opcodes_through_the_merge(generation: str, n_obj: int) -> Counter[str]:
+def _frame_opcodes_through_the_merge(generation: str, n_obj: int, relabel_loop: bool = False) -> Counter[str]:
     """Bytecodes (and calls) of sgbelief code in one patched per-frame merge of one detection into a
-    map of ``n_obj`` objects (the geometric merge stubbed out: only the backend's own work counts)."""
+    map of ``n_obj`` objects (the geometric merge stubbed out: only the backend's own work counts).
+
+    Keys: a code object's qualname (calls) and ``"<opcodes> qualname"`` (bytecodes executed in it).
+    ``relabel_loop``: then run the ``ali-dev`` script's inline relabel loop (``rerun_realtime_mapping.py``:
+    ``obj["class_name"] = most_common_class_name`` where the vote's name differs), with a class
+    list on which every object's vote differs from its belief label, so every object is written."""
     import torch
 
     backend = ConceptGraphsBackend("majority", class_names=CLASSES)
     keep = lambda *a, **k: a[1] if generation == "main" else k.get("obj1", a[0] if a else None)  # noqa: E731
     fns = make_functions(backend, generation, originals={"merge_obj2_into_obj1": keep})
-    objs = [{"class_id": [o % 4], "conf": [0.8], "image_idx": [0], "mask_idx": [o], "class_name": [CLASSES[o % 4]],
+    objs = [{"class_id": [o % 4], "conf": [0.8], "image_idx": [0], "mask_idx": [o], "class_name": CLASSES[o % 4],
              "id": f"obj-{o}"} for o in range(n_obj)]
-    for o in objs:
-        backend.ensure_node(o)
-    backend._synced_len = len(objs)
+    fns.sync_labels(objs)  # the map as a previous frame left it: every object registered
     det = {"class_id": [1], "conf": [0.9], "image_idx": [1], "mask_idx": [0], "class_name": [CLASSES[1]], "id": "det"}
     sims = torch.full((1, n_obj), float("-inf"))
     sims[0, 3] = 1.5
+    script_names = CLASSES[1:] + CLASSES[:1]  # the script's class list: its vote names differ from the beliefs'
     counts: Counter[str] = Counter()
 
-    def local(frame: Any, event: str, arg: Any) -> Any:
-        if event == "opcode":
-            counts["<opcodes>"] += 1
+    def tracer(name: str) -> Any:
+        def local(frame: Any, event: str, arg: Any) -> Any:
+            if event == "opcode":
+                counts[name] += 1
+            return local
         return local
 
     def trace(frame: Any, event: str, arg: Any) -> Any:
@@ -218,7 +224,7 @@ def _frame_opcodes_through_the_merge(generation: str, n_obj: int) -> Counter[str
             return None
         counts[frame.f_code.co_qualname] += 1
         frame.f_trace_opcodes = True
-        return local
+        return tracer(f"<opcodes> {frame.f_code.co_qualname}")
 
     old = sys.gettrace()
     sys.settrace(trace)
@@ -228,9 +234,17 @@ def _frame_opcodes_through_the_merge(generation: str, n_obj: int) -> Counter[str
         else:
             idx = fns.match_detections_to_objects(sims, 1.1)
             out = fns.merge_obj_matches([det], objs, idx, 0.05, False, 0.1, 10, "iou", "cpu")
+            if relabel_loop:
+                for obj in out:
+                    name = script_names[Counter(obj["class_id"]).most_common(1)[0][0]]
+                    if obj["class_name"] != name:
+                        obj["class_name"] = name
     finally:
         sys.settrace(old)
     assert len(out) == n_obj
+    if relabel_loop:  # the script wrote every object, and every object kept its belief label
+        assert all(o["class_name"] == backend.label_of(o) for o in out)
+        assert [o["class_name"] for o in out[4:8]] == list(CLASSES)
     return counts
 
 
@@ -240,3 +254,18 @@ def test_per_frame_merge_work_does_not_grow_with_map_size(generation: str) -> No
     small = _frame_opcodes_through_the_merge(generation, 12)
     large = _frame_opcodes_through_the_merge(generation, 120)
     assert small == large
+
+
+def test_ali_dev_relabel_loop_reads_no_beliefs_whatever_the_map_size() -> None:
+    # the ali-dev script writes class_name on every object whose vote differs from its belief label
+    # (here all of them): each write costs the same few bytecodes in BeliefLabelledObject.__setitem__
+    # and reads no belief; everything else the frame does is the same at 12 and 120 objects
+    setitem = "BeliefLabelledObject.__setitem__"
+    small = _frame_opcodes_through_the_merge("ali-dev", 12, relabel_loop=True)
+    large = _frame_opcodes_through_the_merge("ali-dev", 120, relabel_loop=True)
+    writes = (small.pop(setitem), large.pop(setitem))
+    ops = (small.pop(f"<opcodes> {setitem}"), large.pop(f"<opcodes> {setitem}"))
+    assert writes == (12, 120)
+    assert ops[0] / writes[0] == ops[1] / writes[1] <= 40  # a constant per write: no loop, no call
+    assert small == large
+    assert small == _frame_opcodes_through_the_merge("ali-dev", 12) - Counter({setitem: 12})

@@ -226,8 +226,7 @@ def test_merge_obj_matches_updates_the_mapping_tracker() -> None:
 
     tracker = Tracker()
     backend = ConceptGraphsBackend("comod")
-    backend._patcher = SimpleNamespace(originals={}, helper=lambda name: tracker if name == "tracker" else None)
-    f = make_functions(backend, "ali-dev")
+    f = make_functions(backend, "ali-dev", helpers={"tracker": tracker})
     dets = [make_detection(0.2 * np.random.default_rng(k).random((60, 3)) + 3 * k, 0, "chair", 0.8, 0,
                            mask_idx=k, generation="ali-dev", seed=k) for k in range(3)]
     objects = MapObjectList([dets[0]])

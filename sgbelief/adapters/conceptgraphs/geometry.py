@@ -33,6 +33,23 @@ def cfg_get(cfg: Any, key: str, default: Any = None) -> Any:
         return getattr(cfg, key, default)
 
 
+def geometry_summary(obj: Any) -> tuple[Any, Any]:
+    """(centroid, (lo, hi) box corners) of a ConceptGraphs object's points (``pcd`` or ``pcd_np``),
+    as tuples of floats, or (None, None) when it has none."""
+    pts = None
+    pcd = obj.get("pcd")
+    if pcd is not None and hasattr(pcd, "points"):
+        pts = np.asarray(pcd.points)
+    elif obj.get("pcd_np") is not None:
+        pts = np.asarray(obj["pcd_np"])
+    if pts is None or pts.size == 0:
+        return None, None
+    pts = pts.reshape(-1, 3)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    centroid = tuple(float(x) for x in pts.mean(axis=0))
+    return centroid, (tuple(float(x) for x in lo), tuple(float(x) for x in hi))
+
+
 def denoise_dbscan(pcd: Any, eps: float, min_points: int) -> Any:
     """Keep the largest DBSCAN cluster of ``pcd`` (unchanged when it would keep < 5 points)."""
     import open3d as o3d

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
 from sgbelief.errors import FormatError
 
 
@@ -51,14 +52,12 @@ def import_result(results: Any, backend: Any, *, path: Any = None, progress: Any
     """Replay every object's (class, confidence, frame) history, in frame order, into ``backend``.
 
     ``progress``, if given, is called as ``progress(done, total)`` every 256 detections and at the end."""
-    from sgbelief.adapters.conceptgraphs.backend import _geometry_summary
-
     objects, class_names = _objects_of(results, path)
     if class_names:
         backend.class_names.update(dict(enumerate(class_names)))
     claims: list[tuple[int, int, int, str, dict]] = []
     for order, (node, obj) in enumerate(objects):
-        centroid, bbox = _geometry_summary(obj)
+        centroid, bbox = geometry_summary(obj)
         backend.graph.add_node(node, centroid=centroid, bbox=bbox, source="conceptgraphs",
                                cg_index=order, cg_id=str(obj.get("id")) if obj.get("id") is not None else None)
         backend.identity.rebind(obj, node)
@@ -81,7 +80,7 @@ def import_result(results: Any, backend: Any, *, path: Any = None, progress: Any
     for node, obj in objects:
         ids = [c.class_id for c in backend.claims_of(obj)]
         names = Counter(c.class_name for c in backend.claims_of(obj))
-        hit = backend._class_for(node, backend.committed_predicate(node))
+        hit = backend.committed_class(node)
         summary.labels[node] = {
             "majority": names.most_common(1)[0][0] if names else None,
             "majority_class_id": Counter(ids).most_common(1)[0][0] if ids else None,

@@ -1,14 +1,18 @@
-"""Swap the backend's functions into already-imported ConceptGraphs modules, and back."""
+"""The installer: capture ConceptGraphs' functions from its already-imported modules, build the
+generation's replacements with those originals passed in, swap them in, and back."""
 
 from __future__ import annotations
 
 import inspect
 import sys
+from collections.abc import Callable
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
+from sgbelief.adapters.conceptgraphs.functions import GenerationFunctions, make_functions
+
 if TYPE_CHECKING:  # pragma: no cover
-    from sgbelief.adapters.conceptgraphs.backend import ConceptGraphsBackend
+    from sgbelief.adapters.conceptgraphs.map_beliefs import MapBeliefs
 
 #: ConceptGraphs names the backend replaces, and the module that defines each one
 PATCHED_NAMES: dict[str, str] = {
@@ -42,10 +46,32 @@ def _kwarg_tolerant(cls: type) -> type:
                                        "__qualname__": cls.__qualname__, "_sgbelief_kwarg_tolerant": True})
 
 
-class Patcher:
-    """Records every (namespace, name, old value) it changes so :meth:`uninstall` restores them."""
+def is_replacement(value: Any) -> bool:
+    """True for a function sgbelief swapped in (a method of a :class:`GenerationFunctions`)."""
+    return isinstance(getattr(value, "__self__", None), GenerationFunctions) or bool(
+        getattr(value, "_sgbelief_replacement", False))
 
-    def __init__(self, backend: ConceptGraphsBackend, *, extra_modules: tuple[Any, ...] = (),
+
+def _as_list_method(fn: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    """``fn(objects)`` as a plain function, so it binds as a method of ConceptGraphs' list classes."""
+
+    def get_most_common_class(self: Any) -> Any:
+        return fn(self)
+
+    get_most_common_class.__doc__ = fn.__doc__
+    get_most_common_class._sgbelief_replacement = True  # type: ignore[attr-defined]
+    return get_most_common_class
+
+
+class Patcher:
+    """Captures ConceptGraphs' originals, builds the replacement functions with them and swaps
+    those in; records every (namespace, name, old value) it changes so :meth:`uninstall` restores them.
+
+    ``backend`` is the belief bookkeeping the replacements route into; the Patcher never looks
+    anything up on it beyond passing it to :func:`make_functions`.
+    """
+
+    def __init__(self, backend: MapBeliefs, *, extra_modules: tuple[Any, ...] = (),
                  generation: str | None = None, fix_list_kwargs: bool = True) -> None:
         self.backend = backend
         self.extra = [sys.modules[m] if isinstance(m, str) else m for m in extra_modules]
@@ -54,6 +80,8 @@ class Patcher:
         self._helpers: dict[str, Any] = {}
         self._records: list[tuple[Any, str, Any, bool]] = []  # (namespace, name, old, existed)
         self.generation = generation
+        #: the replacement functions swapped in (built by :meth:`install`)
+        self.functions: GenerationFunctions | None = None
 
     def _module(self, name: str) -> ModuleType | None:
         mod = sys.modules.get(name)
@@ -77,7 +105,7 @@ class Patcher:
                     value = extra.__dict__.get(name)
                     if value is not None:
                         break
-            if value is not None and not getattr(value, "_sgbelief_replacement", False):
+            if value is not None and not is_replacement(value):
                 self.originals[name] = value
         for name, modname in HELPERS.items():
             mod = self._module(modname)
@@ -85,10 +113,8 @@ class Patcher:
                 self._helpers[name] = mod.__dict__[name]
         if self.generation is None:
             self.generation = self._detect_generation()
-        funcs = self.backend.functions(self.generation)
-        replacements = {name: getattr(funcs, name) for name in PATCHED_NAMES if hasattr(funcs, name)}
-        for fn in replacements.values():
-            fn._sgbelief_replacement = True
+        funcs = self.functions = make_functions(self.backend, self.generation, self.originals, self._helpers)
+        replacements = funcs.replacements()
         # every namespace that bound an original (conceptgraph.* modules, run scripts, __main__)
         targets = list(self.extra)
         for modname, mod in list(sys.modules.items()):
@@ -110,7 +136,7 @@ class Patcher:
         classes = self._list_classes(targets)
         for cls in classes.get("DetectionList", []):
             if "get_most_common_class" in cls.__dict__:
-                self._set(cls, "get_most_common_class", funcs.get_most_common_class)
+                self._set(cls, "get_most_common_class", _as_list_method(funcs.get_most_common_class))
         if self.fix_list_kwargs:
             for cname, found in classes.items():
                 for cls in found:
