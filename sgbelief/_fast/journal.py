@@ -333,6 +333,13 @@ def remember_compacted_ids(store: ProvenanceStore, ids: Iterable[str]) -> None:
     store._compacted_order.extend(ids)
 
 
+def index_pending(store: ProvenanceStore, entries: Iterable[ProvenanceEntry]) -> None:
+    """Append pending entries (already in their logs and queues) to their pairs' pending lists, in order."""
+    by_pair = store._pending_by_pair
+    for e in entries:
+        by_pair.setdefault((e.node, e.predicate), []).append(e)
+
+
 def pending_index(store: ProvenanceStore) -> Mapping[PairKey, list[ProvenanceEntry]]:
     """Each pair with pending entries -> those entries in time order (a live read-only view)."""
     return store._pending_by_pair

@@ -33,6 +33,7 @@ import math
 from collections import deque
 from collections.abc import Hashable, Iterable, Iterator, Mapping, Sequence
 from enum import Enum
+from operator import attrgetter
 from typing import Any
 
 from sgbelief.errors import FormatError, RetractionError
@@ -734,12 +735,13 @@ class ProvenanceStore:
             for e in log.entries:
                 if e.event_id is not None:
                     index_event(by_event, e.event_id, e)
-        in_time_order = sorted((e for log in logs.values() for e in log.entries), key=lambda e: e.t)
-        pending = [e for e in in_time_order if e.status in PENDING]
+        by_time = attrgetter("t")
+        pending = sorted((e for log in logs.values() for e in log.entries if e.status in PENDING), key=by_time)
         for e in pending:
             store._pending_by_pair.setdefault((e.node, e.predicate), []).append(e)
         if timeline is None:
-            timeline = (e for e in in_time_order if e.status is not _COMPACTED)
+            timeline = sorted((e for log in logs.values() for e in log.entries if e.status is not _COMPACTED),
+                              key=by_time)
         store._timeline.extend(timeline)
         if quarantine is None:
             quarantine = (e for e in pending if e.status is _QUARANTINED)
