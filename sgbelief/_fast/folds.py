@@ -40,7 +40,7 @@ from sgbelief.graph.provenance import (
 #: a committed entry not yet materialised as a ProvenanceEntry:
 #: (pair key, event id, t, d_alpha, d_beta, stance, the pair's log). The log is the one the store
 #: holds for the key: whatever removes or replaces a pair's log materialises the journal first.
-JournalRecord = tuple[PairKey, "str | None", int, float, float, int, "PairLog | None"]
+JournalRecord = tuple[PairKey, str | None, int, float, float, int, PairLog | None]
 record_event_id = itemgetter(1)
 record_t = itemgetter(2)
 record_d_alpha = itemgetter(3)

@@ -277,7 +277,7 @@ class _Laps:
 @dataclass
 class _IdRuns:
     """The events that recorded entries, regrouped by event id (ids may repeat), stream order
-    within an id, with the life cycle of each id's list in ``ProvenanceStore._by_event``."""
+    within an id, with the life cycle of each id's list in the store's event index."""
 
     events: np.ndarray  # event index
     first_entry: np.ndarray  # index of the event's first entry (its entries are contiguous)
@@ -358,7 +358,7 @@ def _remember(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, pair: np.
 
 def _index_live(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, ev: np.ndarray, n_fold: int,
                 live: list[ProvenanceEntry]) -> None:
-    """``_by_event`` of the live entries: per id, in the order the id's current list was created."""
+    """The event index of the live entries: per id, in the order the id's current list was created."""
     live_ev = ev[n_fold:]
     creator_of = np.empty(cols.n_events, dtype=np.int64)
     creator_of[idr.events] = idr.creator
