@@ -13,9 +13,9 @@ A store loaded from the binary layout defers its settled entries the same way
 entries exist at once, the other entry objects, the event index and the timeline are built by the
 first materialisation, before any journal record.
 
-The functions at the end are this package's private API for code that fills a store's
-structures in bulk (the batched engine, the binary loader); nothing outside ``sgbelief._fast``
-calls them.
+The functions at the end are this package's private API for code that fills or reads a store's
+structures in bulk (the batched engine, the binary loader): nothing outside ``sgbelief._fast``
+should call them (``sgbelief.eval.batched`` does until it moves into this package).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ File layout (``format: sgbelief.scene_graph``, ``version: 1``)::
 
 The queues (revision quarantine Q, disagreement queue Q⊥) are the pending entries of the
 provenance log, so they round-trip with it. Loading validates the envelope with pydantic and
-checks Eq. 5 (stored belief = prior + logged increments) for every pair.
+checks Eq. 4 of the paper (stored belief = prior + logged increments) for every pair.
 
 :func:`save_graph` / :func:`load_graph` also dispatch to the columnar binary layout of
 :mod:`sgbelief.graph.binary` (``.npz``, ``format: sgbelief.scene_graph.npz``) by suffix or

@@ -47,7 +47,7 @@ class SceneGraph:
         provenance: ProvenanceStore | None = None,
     ) -> None:
         self.nx: nx.MultiDiGraph = nx.MultiDiGraph(name=name or "sgbelief")
-        #: the beliefs and their logs (Eq. 4); ``provenance``: an empty store to use instead of a
+        #: the beliefs and their logs; ``provenance``: an empty store to use instead of a
         #: new reference store with ``prior`` (then ``prior`` is ignored)
         self.provenance = ProvenanceStore(prior) if provenance is None else provenance
         self.vocabulary: frozenset[str] | None = None
