@@ -8,6 +8,10 @@ is in [0, 1] and equals the belief mean; the graph round-trips through save/load
 operator with ``update_many`` (every :class:`~sgbelief.fusion.operators.base.BaseOperator`), a copy
 taken before the stream that applies it through ``update_many`` ends with the same beliefs and
 statistics.
+
+``check_store_matches_reference(make_store, operations)`` does the same for a provenance store:
+a store that builds its entries differently (a journal, deferred loading) must be observably the
+reference :class:`~sgbelief.graph.provenance.ProvenanceStore` under any sequence of calls.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import copy
 import math
 import random
 import tempfile
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from sgbelief.fusion.channel import FrameLabels
@@ -23,6 +28,8 @@ from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.events import EvidenceEvent
 from sgbelief.fusion.protocol import Action, FusionOperator, UpdateReport
 from sgbelief.api.scene_graph import SceneGraph
+from sgbelief.errors import RetractionError
+from sgbelief.graph.provenance import ProvenanceEntry, ProvenanceStore
 
 _LABELS = ("car", "truck", "person", "building", None)
 
@@ -150,3 +157,134 @@ def check_fast_matches_reference(
 def conformance_table() -> SubsumptionTable:
     """The two-predicate vocabulary :func:`random_stream` uses."""
     return _table()
+
+
+# ------------------------------------------------------------------ provenance stores
+#: one call on a provenance store, as a tuple (see :func:`apply_store_operations`)
+StoreOperation = tuple[Any, ...]
+
+
+def _bits(x: Any) -> Any:
+    """Floats as their exact hex form (tells -0.0 from 0.0), containers recursively."""
+    if isinstance(x, float):
+        return x.hex()
+    if isinstance(x, (list, tuple)):
+        return [_bits(v) for v in x]
+    return x
+
+
+def entry_state(entry: ProvenanceEntry) -> list[Any]:
+    """Every field of an entry, floats bit for bit."""
+    return _bits([entry.event_id, entry.t, entry.d_alpha, entry.d_beta, entry.status.value, entry.stance,
+                  entry.corroborated_by, entry.n_folded, entry.node, entry.predicate, entry.alive])
+
+
+def store_state(store: ProvenanceStore) -> dict[str, Any]:
+    """Everything observable about a provenance store, floats bit for bit and every order kept:
+    beliefs and logs, the event index, the compaction timeline, the queues, each pair's pending
+    entries, the compacted-id memory and the saved form. Checks on the way that the index, the
+    timeline and the queues hold entry objects of the logs (or retired ones, for the lazily
+    emptied queues and timeline)."""
+    logs = store.logs()
+    logged = {id(e) for log in logs.values() for e in log.entries}
+    index = store.event_index()
+    timeline = store.compaction_timeline()
+    for e in (*(e for es in index.values() for e in es), *(e for e in timeline if e.alive),
+              *(e for e in (*store.quarantine, *store.disagreement) if e.alive)):
+        assert id(e) in logged, f"{e!r} is indexed or queued but in no log"
+    return {
+        "prior": _bits([store.prior_alpha, store.prior_beta]),
+        "remember_compacted": store.remember_compacted,
+        "n_compacted": store.n_compacted,
+        "pairs": [(key, _bits(log.alpha), _bits(log.beta), [entry_state(e) for e in log.entries])
+                  for key, log in logs.items()],
+        "event_index": [(eid, [entry_state(e) for e in es]) for eid, es in index.items()],
+        "timeline": [entry_state(e) for e in timeline],
+        "quarantine": [entry_state(e) for e in store.quarantine],
+        "disagreement": [entry_state(e) for e in store.disagreement],
+        "pending": [(key, [entry_state(e) for e in store.pending(*key)]) for key in logs if store.pending(*key)],
+        "compacted_ids": store.compacted_ids(),
+        "to_dict": _bits(store.to_dict()),
+    }
+
+
+def apply_store_operations(store: ProvenanceStore, operations: Sequence[StoreOperation]) -> list[Any]:
+    """Run calls on a store; returns, per call, what it returned (entries as
+    :func:`entry_state`, a RetractionError as its message) and every pair's belief after it
+    (beliefs read without building entries). The calls:
+
+    ``("commit", node, predicate, event_id, t, d_alpha, d_beta, stance)``,
+    ``("record", node, predicate, event_id, t, d_alpha, d_beta, status, stance)``,
+    ``("transition", k, status, scale)`` (the k-th waiting entry of the queues, modulo),
+    ``("transition_held", k, status, scale)`` (the k-th live entry a ``record`` or ``read_event``
+    returned so far), ``("compact", before_t)``, ``("retract", event_id, cascade_window)``,
+    ``("read", node, predicate)``, ``("read_event", event_id)``, ``("move", absorb, keep)``,
+    ``("remove", node)``."""
+    held: list[ProvenanceEntry] = []
+    out: list[Any] = []
+    for op in operations:
+        kind = op[0]
+        try:
+            if kind == "commit":
+                out.append(store.commit(*op[1:]))
+            elif kind == "record":
+                entry = store.record(*op[1:])
+                held.append(entry)
+                out.append(entry_state(entry))
+            elif kind in ("transition", "transition_held"):
+                _, k, status, scale = op
+                if kind == "transition":
+                    choice = [e for e in (*store.quarantine, *store.disagreement) if e.alive and e.pending]
+                else:
+                    choice = [e for e in held if e.alive]
+                if choice:
+                    store.transition(choice[k % len(choice)], status, scale=scale)
+                out.append(len(choice))
+            elif kind == "compact":
+                out.append(store.compact(op[1]))
+            elif kind == "retract":
+                out.append(store.retract(op[1], cascade_window=op[2]))
+            elif kind == "read":
+                out.append([entry_state(e) for e in store.entries(op[1], op[2])])
+            elif kind == "read_event":
+                found = store.event_entries(op[1])
+                held += found
+                out.append([entry_state(e) for e in found])
+            elif kind == "move":
+                out.append(store.move_node(op[1], op[2]))
+            elif kind == "remove":
+                out.append(store.remove_node(op[1]))
+            else:
+                raise ValueError(f"unknown store operation {kind!r}")
+        except RetractionError as exc:
+            out.append(f"RetractionError: {exc}")
+        out.append({k: _bits(store.alpha_beta(*k)) for k in store.pairs()})
+    return out
+
+
+def check_store_matches_reference(
+    make_store: Callable[..., ProvenanceStore],
+    operations: Sequence[StoreOperation],
+    *,
+    prior: tuple[float, float] = (1.0, 1.0),
+    remember_compacted: int = 100_000,
+) -> None:
+    """Raise AssertionError unless a store made by ``make_store(prior, remember_compacted=...)``
+    behaves as the reference :class:`~sgbelief.graph.provenance.ProvenanceStore` under
+    ``operations`` (:func:`apply_store_operations`): the same results and beliefs after every
+    call, and the same :func:`store_state` at the end. The same exception type, if a call raises
+    anything but a RetractionError."""
+    runs = []
+    for factory in (ProvenanceStore, make_store):
+        store = factory(prior, remember_compacted=remember_compacted)
+        try:
+            runs.append((apply_store_operations(store, operations), store))
+        except Exception as exc:  # noqa: BLE001 - compared below
+            runs.append((type(exc), store))
+    (ref_out, ref), (out, other) = runs
+    if isinstance(ref_out, type) or isinstance(out, type):
+        assert ref_out == out, f"the reference store gives {ref_out!r}, the other store {out!r}"
+        return
+    for i, (want, got) in enumerate(zip(ref_out, out)):
+        assert want == got, f"result {i // 2} ({operations[i // 2]!r}): reference {want!r}, other store {got!r}"
+    assert store_state(ref) == store_state(other), "the stores differ at the end"

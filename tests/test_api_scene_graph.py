@@ -50,7 +50,7 @@ def test_loaders_build_the_class_they_are_given(tmp_path: Path, suffix: str) -> 
     path = save_graph(g, tmp_path / f"g.{suffix}")
     plain = load_graph(path)
     assert type(plain) is model.SceneGraph  # the model class by default
-    public = load_graph(path, cls=SceneGraph)
+    public = load_graph(path, graph_type=SceneGraph)
     assert type(public) is SceneGraph
     assert type(SceneGraph.load(path)) is SceneGraph
 

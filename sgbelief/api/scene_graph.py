@@ -6,7 +6,7 @@ knows neither files nor queries. This subclass adds them as thin methods over th
 the layers that own them::
 
     g.save(path)                 # sgbelief.graph.persistence.save_graph(g, path)
-    SceneGraph.load(path)        # sgbelief.graph.persistence.load_graph(path, cls=SceneGraph)
+    SceneGraph.load(path)        # sgbelief.graph.persistence.load_graph(path, graph_type=SceneGraph, loading=...)
     g.query("is_chair & !is_near_window")   # sgbelief.query.run_query(g, expr)
 
 and chooses the provenance store: ``engine="fast"`` (the default) or ``engine="reference"`` (the
@@ -19,8 +19,11 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, Literal
 
+from sgbelief._fast.journal import JournalledProvenanceStore
+from sgbelief._fast.loading import FAST_LOADING
 from sgbelief.graph import scene_graph as model
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA
+from sgbelief.graph.loading import REFERENCE_LOADING, GraphLoading
 from sgbelief.graph.persistence import load_graph, save_graph
 from sgbelief.graph.provenance import ProvenanceStore
 from sgbelief.query.engine import QueryResult, run_query
@@ -29,11 +32,14 @@ __all__ = ["SceneGraph", "Engine", "ENGINES"]
 
 Engine = Literal["fast", "reference"]
 
-#: provenance store per engine (built from the prior); the journalled store of sgbelief._fast plugs in at "fast"
+#: provenance store per engine (built from the prior): the journalled store of sgbelief._fast, or
+#: the reference log; both observably equal (sgbelief.testing.check_store_matches_reference)
 _PROVENANCE_STORES: dict[str, Callable[[tuple[float, float]], ProvenanceStore]] = {
-    "fast": ProvenanceStore,
+    "fast": JournalledProvenanceStore,
     "reference": ProvenanceStore,
 }
+#: how a loaded graph's store is built, per engine
+_LOADINGS: dict[str, GraphLoading] = {"fast": FAST_LOADING, "reference": REFERENCE_LOADING}
 ENGINES: tuple[str, ...] = tuple(_PROVENANCE_STORES)
 
 
@@ -62,9 +68,7 @@ class SceneGraph(model.SceneGraph):
         name: str | None = None,
         engine: Engine = "fast",
     ) -> None:
-        store = provenance_store(engine, prior)
-        super().__init__(vocabulary, prior=prior, name=name)
-        self.provenance = store
+        super().__init__(vocabulary, prior=prior, name=name, provenance=provenance_store(engine, prior))
 
     def save(self, path: str | Path, *, format: str | None = None) -> Path:
         """Save losslessly and atomically; returns the file written.
@@ -76,11 +80,13 @@ class SceneGraph(model.SceneGraph):
         return save_graph(self, path, format=format)
 
     @classmethod
-    def load(cls, path: str | Path, *, format: str | None = None) -> SceneGraph:
+    def load(cls, path: str | Path, *, format: str | None = None, engine: Engine = "fast") -> SceneGraph:
         """Load a graph written by :meth:`save` (format from the suffix, or the file found in a
-        directory) as an instance of this class; malformed, truncated or edited files raise
-        FormatError."""
-        return load_graph(path, format=format, cls=cls)
+        directory) as an instance of this class, its store built by ``engine``; malformed,
+        truncated or edited files raise FormatError."""
+        if engine not in _LOADINGS:
+            raise ValueError(f"engine must be one of {list(ENGINES)}, got {engine!r}")
+        return load_graph(path, format=format, graph_type=cls, loading=_LOADINGS[engine])
 
     def query(self, expr: Any, **kwargs: Any) -> QueryResult:
         """Answer a compound query: :func:`sgbelief.query.run_query` on this graph."""

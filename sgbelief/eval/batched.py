@@ -41,8 +41,9 @@ from sgbelief.eval.formats import EventRecord
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig, resolve_config
 from sgbelief.gc_tuning import relaxed_gc
-from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore, _PairLog
+from sgbelief._fast.journal import add_logs, extend_timeline, pending_index, remember_compacted_ids, set_event_index
 from sgbelief.api.scene_graph import SceneGraph
+from sgbelief.graph.provenance import EntryStatus, PairLog, ProvenanceEntry, ProvenanceStore
 
 BATCHED_OPERATORS = ("majority", "naive_bayes", "overwrite")
 
@@ -276,7 +277,7 @@ class _Laps:
 @dataclass
 class _IdRuns:
     """The events that recorded entries, regrouped by event id (ids may repeat), stream order
-    within an id, with the life cycle of each id's list in ``ProvenanceStore._by_event``."""
+    within an id, with the life cycle of each id's list in the store's event index."""
 
     events: np.ndarray  # event index
     first_entry: np.ndarray  # index of the event's first entry (its entries are contiguous)
@@ -352,12 +353,12 @@ def _remember(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, pair: np.
     # visit positions grow with the compaction, so the key alone orders (compaction, key)
     order = np.argsort(unit_key, kind="stable")
     released_events = idr.events[idr.emptied][sel][order][-cap:]
-    prov._compacted_order.extend(map(cols.event_ids.__getitem__, released_events.tolist()))
+    remember_compacted_ids(prov, map(cols.event_ids.__getitem__, released_events.tolist()))
 
 
 def _index_live(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, ev: np.ndarray, n_fold: int,
                 live: list[ProvenanceEntry]) -> None:
-    """``_by_event`` of the live entries: per id, in the order the id's current list was created."""
+    """The event index of the live entries: per id, in the order the id's current list was created."""
     live_ev = ev[n_fold:]
     creator_of = np.empty(cols.n_events, dtype=np.int64)
     creator_of[idr.events] = idr.creator
@@ -366,10 +367,10 @@ def _index_live(prov: ProvenanceStore, cols: EventColumns, idr: _IdRuns, ev: np.
     bounds = np.r_[_starts(key[order]), len(key)].tolist()
     owners = live_ev[order][bounds[:-1]].tolist()
     ordered = live if idr.unique else [live[i] for i in order.tolist()]
-    by_event, ids = prov._by_event, cols.event_ids
-    for owner, begin, end in zip(owners, bounds[:-1], bounds[1:]):
-        # one entry: the entry itself (as ProvenanceStore.record builds the index)
-        by_event[ids[owner]] = ordered[begin] if end - begin == 1 else ordered[begin:end]
+    ids = cols.event_ids
+    # one entry: the entry itself (as ProvenanceStore.record builds the index)
+    set_event_index(prov, ((ids[owner], ordered[begin] if end - begin == 1 else ordered[begin:end])
+                           for owner, begin, end in zip(owners, bounds[:-1], bounds[1:])))
 
 
 # ------------------------------------------------------------------ replay
@@ -466,9 +467,8 @@ def batched_replay(
         if isinstance(node, bool) or not isinstance(node, (str, int)):
             raise TypeError(f"node ids must be str or int (JSON-serialisable), got {type(node).__name__}")
     graph.nx.add_nodes_from(new_nodes)
-    logs = list(map(_PairLog, alpha[seq].tolist(), beta[seq].tolist()))
-    prov._pairs.update(zip(seq_keys, logs))
-    log_of: dict[int, _PairLog] = dict(zip(pair_seq.tolist(), logs))
+    logs = add_logs(prov, seq_keys, alpha[seq].tolist(), beta[seq].tolist())
+    log_of: dict[int, PairLog] = dict(zip(pair_seq.tolist(), logs))
     if buckets is not None:
         b_pair, b_t, b_alpha, b_beta, b_n = buckets
         b_keys = list(map(keys.__getitem__, b_pair.tolist()))
@@ -488,7 +488,7 @@ def batched_replay(
                     [k[0] for k in live_keys], [k[1] for k in live_keys], stance.tolist()))
     for p, entry in zip(live_pair, live):
         log_of[p].entries.append(entry)
-    prov._timeline.extend(live)
+    extend_timeline(prov, live)
     idr = _IdRuns.build(cols, ev, fold_k, opens)
     _index_live(prov, cols, idr, ev, n_fold, live)
     lap("objects")
@@ -522,14 +522,14 @@ def provenance_signature(graph: SceneGraph) -> dict[str, Any]:
         "clock": graph.clock,
         "meta": dict(graph.meta),
         "pairs": [(key, _bits(log.alpha), _bits(log.beta), [entry(e) for e in log.entries])
-                  for key, log in prov._pairs.items()],
+                  for key, log in prov.logs().items()],
         "quarantine": [entry(e) for e in prov.quarantine],
         "disagreement": [entry(e) for e in prov.disagreement],
-        "pending_by_pair": {k: [entry(e) for e in v] for k, v in prov._pending_by_pair.items()},
+        "pending_by_pair": {k: [entry(e) for e in v] for k, v in pending_index(prov).items()},
         "by_event": [(k, [entry(e) for e in v]) for k, v in prov.event_index().items()],
-        "timeline": [entry(e) for e in prov._timeline],
-        "compacted_order": list(prov._compacted_order),
-        "compacted_memory_bound": prov._compacted_order.maxlen,
+        "timeline": [entry(e) for e in prov.compaction_timeline()],
+        "compacted_order": prov.compacted_ids(),
+        "compacted_memory_bound": max(prov.remember_compacted, 0),
         "n_compacted": prov.n_compacted,
         "prior": (prov.prior_alpha, prov.prior_beta, prov.remember_compacted),
     }

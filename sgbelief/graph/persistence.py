@@ -11,7 +11,7 @@ File layout (``format: sgbelief.scene_graph``, ``version: 1``)::
 
 The queues (revision quarantine Q, disagreement queue Q⊥) are the pending entries of the
 provenance log, so they round-trip with it. Loading validates the envelope with pydantic and
-checks Eq. 5 (stored belief = prior + logged increments) for every pair.
+checks Eq. 4 of the paper (stored belief = prior + logged increments) for every pair.
 
 :func:`save_graph` / :func:`load_graph` also dispatch to the columnar binary layout of
 :mod:`sgbelief.graph.binary` (``.npz``, ``format: sgbelief.scene_graph.npz``) by suffix or
@@ -22,20 +22,16 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from sgbelief.errors import FormatError
-from sgbelief.graph.atomic_files import atomic_write_binary, atomic_write_text, remove_stale_temp_files
-from sgbelief.graph.attr_values import jsonable, restore_node_attr
+from sgbelief.graph.atomic import atomic_write_binary, atomic_write_text, remove_stale_temp_files
 from sgbelief.graph.binary import load_graph_npz, save_graph_npz
-from sgbelief.graph.provenance import ProvenanceStore
+from sgbelief.graph.json_values import jsonable, restore_node_attr
+from sgbelief.graph.loading import REFERENCE_LOADING, GraphLoading
 from sgbelief.graph.scene_graph import SceneGraph
-from sgbelief.version import __version__
-
-#: the graph class a loader builds (the model's SceneGraph, or a subclass such as sgbelief.SceneGraph)
-G = TypeVar("G", bound=SceneGraph)
 
 FORMAT = "sgbelief.scene_graph"
 VERSION = 1
@@ -90,7 +86,6 @@ def _resolve(path: str | Path, format: str | None, *, loading: bool = False) -> 
 
 
 def graph_to_dict(graph: SceneGraph) -> dict[str, Any]:
-    """The JSON document of ``graph`` (the layout in the module docstring)."""
     g = graph.nx
     nodes = []
     for n, data in g.nodes(data=True):
@@ -104,6 +99,7 @@ def graph_to_dict(graph: SceneGraph) -> dict[str, Any]:
         for name, val in data.items():
             entry[name] = jsonable(val, f"edge {u!r}->{v!r} attribute {name!r}")
         edges.append(entry)
+    from sgbelief.version import __version__
 
     return {
         "format": FORMAT,
@@ -131,9 +127,10 @@ def save_graph(graph: SceneGraph, path: str | Path, *, format: str | None = None
     return target
 
 
-def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>", cls: type[G] = SceneGraph) -> G:  # type: ignore[assignment]
-    """The graph a :func:`graph_to_dict` document describes, built as an instance of ``cls`` (the
-    model's SceneGraph by default); a malformed document raises FormatError naming the field."""
+def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>", graph_type: type[SceneGraph] = SceneGraph,
+                    loading: GraphLoading = REFERENCE_LOADING) -> SceneGraph:
+    """The graph of a JSON document (:func:`graph_to_dict`); ``graph_type`` / ``loading`` as in
+    :func:`load_graph`."""
     try:
         env = _Envelope.model_validate(doc)
     except ValidationError as exc:
@@ -143,7 +140,7 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>", cls: type[G]
     if env.version > VERSION or env.version < 1:
         raise FormatError(f"field 'version': file has schema version {env.version}; this sgbelief reads 1..{VERSION}",
                           path=source)
-    graph = cls(vocabulary=env.vocabulary)
+    graph = graph_type(vocabulary=env.vocabulary)
     graph.clock = env.clock
     graph.meta = dict(env.meta)
     try:
@@ -171,7 +168,7 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>", cls: type[G]
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(f"field 'graph': malformed node-link data ({type(exc).__name__}: {exc})", path=source) from exc
     try:
-        graph.provenance = ProvenanceStore.from_dict(env.provenance)
+        graph.provenance = loading.store_from_dict(env.provenance)
     except FormatError as exc:
         raise FormatError(str(exc), path=source) from exc
     for node, _pred in graph.provenance.pairs():
@@ -180,19 +177,20 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>", cls: type[G]
     return graph
 
 
-def load_graph(path: str | Path, *, format: str | None = None, cls: type[G] = SceneGraph) -> G:  # type: ignore[assignment]
-    """Read a saved graph as an instance of ``cls`` (the model's SceneGraph by default; the public
-    ``sgbelief.SceneGraph.load`` passes its own class); truncated, edited or hostile files raise
-    FormatError (line / array and field).
+def load_graph(path: str | Path, *, format: str | None = None, graph_type: type[SceneGraph] = SceneGraph,
+               loading: GraphLoading = REFERENCE_LOADING) -> SceneGraph:
+    """Read a saved graph; truncated, edited or hostile files raise FormatError (line / array and field).
 
     A directory holds ``graph.json`` or ``graph.npz``; a file's suffix selects its format unless
-    ``format`` is given.
+    ``format`` is given. ``graph_type``: the class of the graph returned; ``loading``: how its
+    provenance store and node table are built (:mod:`sgbelief.graph.loading`; the reference
+    store by default).
     """
     target, fmt = _resolve(path, format, loading=True)
     if not target.exists():
         raise FileNotFoundError(f"no saved scene graph at {target}")
     if fmt == "npz":
-        return load_graph_npz(target, cls=cls)
+        return load_graph_npz(target, graph_type=graph_type, loading=loading)
     with open(target, "rb") as fh:
         if fh.read(4) == _ZIP_MAGIC:
             raise FormatError("this is a binary (npz) scene graph, not JSON; name it .npz or pass format='npz'",
@@ -206,7 +204,7 @@ def load_graph(path: str | Path, *, format: str | None = None, cls: type[G] = Sc
         raise FormatError(f"not UTF-8 text: {exc}", path=target) from exc
     if not isinstance(doc, dict):
         raise FormatError("top level must be a JSON object", path=target)
-    return graph_from_dict(doc, source=str(target), cls=cls)
+    return graph_from_dict(doc, source=str(target), graph_type=graph_type, loading=loading)
 
 
 __all__ = [

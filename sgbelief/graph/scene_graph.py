@@ -49,9 +49,12 @@ class SceneGraph:
         *,
         prior: tuple[float, float] = (PRIOR_ALPHA, PRIOR_BETA),
         name: str | None = None,
+        provenance: ProvenanceStore | None = None,
     ) -> None:
         self.nx: nx.MultiDiGraph = nx.MultiDiGraph(name=name or "sgbelief")
-        self.provenance = ProvenanceStore(prior)
+        #: the beliefs and their logs; ``provenance``: an empty store to use instead of a
+        #: new reference store with ``prior`` (then ``prior`` is ignored)
+        self.provenance = ProvenanceStore(prior) if provenance is None else provenance
         self.vocabulary: frozenset[str] | None = None
         if vocabulary is not None:
             preds = getattr(vocabulary, "predicates", vocabulary)

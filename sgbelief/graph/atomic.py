@@ -1,5 +1,9 @@
-"""Atomic file writes: a reader never sees a partial file, and a failed or killed save leaves the old
-one untouched (temp file in the same directory, fsync, rename; stale temp files are cleared)."""
+"""Atomic file writes: a reader never sees a partial file, a failed write leaves the old file.
+
+Each write goes to a temp file in the target's directory (``.<name>.<pid>.XXXX.tmp``), is
+fsynced and renamed over the target. Temp files that a killed writer left behind are removed by
+the next write of the same target.
+"""
 
 from __future__ import annotations
 
@@ -10,8 +14,6 @@ import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import BinaryIO
-
-__all__ = ["atomic_write_text", "atomic_write_binary", "remove_stale_temp_files"]
 
 
 def atomic_write_text(path: str | Path, text: str | Iterable[str]) -> None:
@@ -119,3 +121,6 @@ def atomic_write_binary(path: str | Path, write: Callable[[BinaryIO], None]) -> 
         raise
     finally:
         _IN_FLIGHT.discard(tmp)
+
+
+__all__ = ["atomic_write_binary", "atomic_write_text", "remove_stale_temp_files"]

@@ -1,17 +1,14 @@
-"""Attribute values as both saved layouts store them: JSON-safe on the way out, the API's tuples on
-the way back in."""
+"""Attribute values as both saved formats hold them: JSON values out, the API's tuples back in."""
 
 from __future__ import annotations
 
 import math
 from typing import Any
 
-__all__ = ["jsonable", "restore_node_attr"]
-
 
 def jsonable(value: Any, where: str) -> Any:
-    """``value`` as JSON data (lists for tuples and numpy arrays, string keys); a non-finite float
-    or an object JSON cannot hold raises, naming ``where`` (the node / edge and attribute)."""
+    """``value`` as plain JSON values (lists for tuples and numpy arrays, str keys); ValueError
+    on a non-finite float, TypeError on anything else JSON cannot hold, both naming ``where``."""
     if value is None or isinstance(value, (str, bool, int)):
         return value
     if isinstance(value, float):

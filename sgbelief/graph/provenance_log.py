@@ -1,0 +1,208 @@
+"""A provenance log (paper §4.3): its entries, their statuses, the belief they define (Eq. 4)
+and the fold that compaction applies to them.
+
+An entry is ``(event id, t, d_alpha, d_beta, status)`` plus the stance of its evidence; a pair's
+log (:class:`PairLog`) is its entries in order with the running belief. The belief is *defined*
+by the log (:func:`belief_from_entries`, Eq. 4); compaction folds old entries into one
+``compacted`` entry of equal increment (:func:`fold_into_bucket`). The store of all logs, with
+the queues, the event index, retraction and compaction, is :mod:`sgbelief.graph.provenance`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from enum import Enum
+from typing import Any
+
+
+class EntryStatus(str, Enum):
+    """Life-cycle status of a provenance entry."""
+
+    COMMITTED = "committed"  #: applied to the belief (Eq. 3)
+    REFUSED = "refused"  #: ⊥ verdict: refused, pending in the disagreement queue Q⊥
+    RESOLVED = "resolved"  #: ⊥ later corroborated by ⊤ within T_disagree; never committed
+    EXPIRED = "expired"  #: ⊥ released on timeout, unresolved; never committed
+    DISMISSED = "dismissed"  #: ⊥ closed by an explicit operator decision without committing
+    QUARANTINED = "quarantined"  #: revision (KL > tau_rev) pending in the quarantine Q
+    RELEASED = "released"  #: revision released on timeout, committed at reduced weight w/k
+    DISCARDED = "discarded"  #: revision disconfirmed within T_cor; never committed
+    CONFIRMED = "confirmed"  #: committed by an explicit operator confirmation
+    COMPACTED = "compacted"  #: several old entries folded into one equivalent increment
+
+
+#: statuses whose increments count in the belief (Eq. 4)
+COUNTED: frozenset[EntryStatus] = frozenset(
+    {EntryStatus.COMMITTED, EntryStatus.RELEASED, EntryStatus.CONFIRMED, EntryStatus.COMPACTED}
+)
+#: statuses of entries still waiting in a queue
+PENDING: frozenset[EntryStatus] = frozenset({EntryStatus.REFUSED, EntryStatus.QUARANTINED})
+
+# a member read once (an attribute lookup on an Enum class runs Python code)
+_COMPACTED = EntryStatus.COMPACTED
+
+
+class ProvenanceEntry:
+    """One log entry. Mutable only through :class:`ProvenanceStore` (status transitions)."""
+
+    __slots__ = (
+        "event_id",
+        "t",
+        "d_alpha",
+        "d_beta",
+        "status",
+        "node",
+        "predicate",
+        "stance",
+        "corroborated_by",
+        "n_folded",
+        "alive",
+    )
+
+    def __init__(
+        self,
+        event_id: str | None,
+        t: int,
+        d_alpha: float,
+        d_beta: float,
+        status: EntryStatus,
+        node: Any,
+        predicate: str,
+        stance: int = 0,
+    ) -> None:
+        self.event_id = event_id
+        self.t = t
+        self.d_alpha = d_alpha
+        self.d_beta = d_beta
+        self.status = status
+        self.node = node
+        self.predicate = predicate
+        #: +1 when the evidence supports the predicate, -1 when it denies it, 0 neutral
+        self.stance = stance
+        #: ids of events whose corroboration committed this (revision) entry
+        self.corroborated_by: list[str] | None = None
+        #: number of original entries a compacted entry stands for
+        self.n_folded = 1
+        #: False once retracted or folded away
+        self.alive = True
+
+    @property
+    def counted(self) -> bool:
+        return self.status in COUNTED
+
+    @property
+    def pending(self) -> bool:
+        return self.status in PENDING
+
+    def as_tuple(self) -> tuple[str | None, int, float, float, str]:
+        """(event id, t, d_alpha, d_beta, status) as in the paper's log."""
+        return (self.event_id, self.t, self.d_alpha, self.d_beta, self.status.value)
+
+    def __repr__(self) -> str:
+        return (
+            f"ProvenanceEntry(event_id={self.event_id!r}, t={self.t}, d_alpha={self.d_alpha:.6g}, "
+            f"d_beta={self.d_beta:.6g}, status={self.status.value}, node={self.node!r}, "
+            f"predicate={self.predicate!r})"
+        )
+
+
+# ------------------------------------------------------------------ the equations
+def belief_from_entries(prior: tuple[float, float], entries: Iterable[ProvenanceEntry]) -> tuple[float, float]:
+    """Eq. 4 (``eq:provrecon``): the belief a log defines,
+
+        (alpha, beta) = (alpha_0, beta_0) + sum over counted entries of (d_alpha, d_beta),
+
+    each sum exactly rounded (``math.fsum``), so it does not depend on the order of the log."""
+    counted = [e for e in entries if e.status in COUNTED]
+    return (
+        prior[0] + math.fsum(e.d_alpha for e in counted),
+        prior[1] + math.fsum(e.d_beta for e in counted),
+    )
+
+
+def settled_before(
+    entries: Sequence[ProvenanceEntry], before_t: int
+) -> tuple[ProvenanceEntry | None, list[ProvenanceEntry], list[ProvenanceEntry]]:
+    """Split a pair's log for compaction: (its compacted bucket or None, the entries to fold,
+    the entries kept). Folded are the settled entries (not pending in a queue) with
+    ``t < before_t``, and any further compacted entry (a log holds at most one bucket)."""
+    bucket: ProvenanceEntry | None = None
+    fold: list[ProvenanceEntry] = []
+    keep: list[ProvenanceEntry] = []
+    for entry in entries:
+        if entry.status is _COMPACTED and bucket is None:
+            bucket = entry
+        elif entry.status is _COMPACTED or (entry.t < before_t and entry.status not in PENDING):
+            fold.append(entry)
+        else:
+            keep.append(entry)
+    return bucket, fold, keep
+
+
+def fold_into_bucket(
+    bucket: ProvenanceEntry | None, folded: Sequence[ProvenanceEntry], node: Any, predicate: str
+) -> ProvenanceEntry:
+    """Compaction (§4.3): fold entries into a pair's ``compacted`` bucket (a new one when None).
+
+    The bucket's increment grows by the exactly rounded sum of the folded entries' counted
+    increments, so the pair's belief under Eq. 4 is unchanged; it stands for as many original
+    entries as they did (``n_folded``) and takes the latest of their times."""
+    d_alpha = math.fsum(e.d_alpha for e in folded if e.status in COUNTED)
+    d_beta = math.fsum(e.d_beta for e in folded if e.status in COUNTED)
+    n_folded = sum(e.n_folded for e in folded)
+    t_max = max(e.t for e in folded)
+    return merge_into_bucket(bucket, node, predicate, t_max, d_alpha, d_beta, n_folded)
+
+
+def merge_into_bucket(
+    bucket: ProvenanceEntry | None, node: Any, predicate: str, t_max: int, d_alpha: float, d_beta: float, n_folded: int
+) -> ProvenanceEntry:
+    """Add one folded increment (already summed) to a pair's bucket, or make the bucket.
+
+    One IEEE addition of two floats is correctly rounded, so adding the sum to the bucket equals
+    ``math.fsum`` of the two."""
+    if bucket is None:
+        bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, _COMPACTED, node, predicate)
+        bucket.n_folded = n_folded
+        return bucket
+    bucket.d_alpha += d_alpha
+    bucket.d_beta += d_beta
+    bucket.n_folded += n_folded
+    if t_max > bucket.t:
+        bucket.t = t_max
+    return bucket
+
+
+# ------------------------------------------------------------------ a pair's log
+def event_list(found: ProvenanceEntry | list[ProvenanceEntry] | None) -> list[ProvenanceEntry]:
+    """A value of the event index as a (new) list of entries."""
+    if found is None:
+        return []
+    if type(found) is list:
+        return list(found)
+    return [found]  # type: ignore[list-item]
+
+
+def index_event(by_event: dict[str, Any], event_id: str, entry: ProvenanceEntry) -> None:
+    """Add an entry to an event index: the entry itself for an id's first entry, a list from its
+    second on (the id keeps its place in the dict; most events have one entry, and then no list
+    is allocated)."""
+    prev = by_event.get(event_id)
+    if prev is None:
+        by_event[event_id] = entry
+    elif type(prev) is list:
+        prev.append(entry)
+    else:
+        by_event[event_id] = [prev, entry]
+
+
+class PairLog:
+    """The log of one (node, predicate) pair: its entries in order and its running belief
+    (equal to :func:`belief_from_entries` of the entries, kept so that reads are O(1))."""
+
+    __slots__ = ("alpha", "beta", "entries")
+
+    def __init__(self, alpha: float, beta: float) -> None:
+        self.alpha = alpha
+        self.beta = beta
+        self.entries: list[ProvenanceEntry] = []
