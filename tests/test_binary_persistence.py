@@ -37,7 +37,12 @@ def load_fast(path: Path, **kw: Any) -> SceneGraph:
 
 
 #: the reference loader (every entry built at once) and the fast one
-LOADERS = [pytest.param(SceneGraph.load, id="reference"), pytest.param(load_fast, id="fast")]
+def load_reference(path: Path, **kw: Any) -> SceneGraph:
+    """A graph whose store is the reference log, every entry built at load."""
+    return SceneGraph.load(path, engine="reference", **kw)
+
+
+LOADERS = [pytest.param(load_reference, id="reference"), pytest.param(load_fast, id="fast")]
 
 
 # ---------------------------------------------------------------- helpers
@@ -637,7 +642,7 @@ def test_deferred_load_is_invisible(tmp_path_factory: pytest.TempPathFactory, be
         if node not in g.nx:
             g.add_node(node)
     path = g.save(tmp_path_factory.mktemp("deferred") / "g.npz")
-    lazy, eager, ref = load_fast(path), load_fast(path), SceneGraph.load(path)
+    lazy, eager, ref = load_fast(path), load_fast(path), load_reference(path)
     eager.provenance.materialize()
     assert lazy.provenance.deferred == (eager.provenance.count_entries() > 0) and not ref.provenance.deferred
     results = [apply_store_operations(h.provenance, after) for h in (lazy, eager, ref)]
