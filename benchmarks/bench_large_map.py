@@ -122,7 +122,7 @@ def main() -> int:
     args = ap.parse_args()
     import numpy as np
 
-    from sgbelief.eval.batched import EventColumns, batched_replay
+    from sgbelief._fast.batched import EventColumns, batched_replay
     from sgbelief.fusion.compatibility import SubsumptionTable
     from sgbelief.graph.scene_graph import SceneGraph
     from sgbelief.query import QueryEngine, named_queries

@@ -20,7 +20,7 @@ from sgbelief.cli import main
 from sgbelief.errors import FormatError, RetractionError
 from sgbelief.fusion import queues
 from sgbelief.fusion.channel import FrameLabels
-from sgbelief.fusion.registry import make_operator
+from sgbelief.api.operators import make_operator
 from sgbelief.graph.binary import FORMAT, graph_to_arrays, load_graph_npz
 from sgbelief.graph.persistence import graph_to_dict
 from sgbelief.graph.provenance import EntryStatus

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sgbelief.errors import RetractionError
-from sgbelief.eval.batched import provenance_signature
+from sgbelief.testing import provenance_signature
 from sgbelief.graph import provenance
 from sgbelief.graph.provenance import EntryStatus
 from sgbelief.graph.scene_graph import SceneGraph

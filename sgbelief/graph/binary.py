@@ -21,15 +21,13 @@ the queues' and the compaction timeline's exact order, ``corroborated_by == []``
 
 from __future__ import annotations
 
-import gc
 import json
 import math
 import os
 import zipfile
 import zlib
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable
 from functools import partial
 from itertools import chain, islice, repeat
 from operator import attrgetter, is_, is_not, itemgetter
@@ -40,6 +38,7 @@ import networkx as nx
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from sgbelief._fast.gc import gc_paused, young_collections_only
 from sgbelief.errors import FormatError
 from sgbelief.graph.persistence import _jsonable, atomic_write_binary, restore_node_attr
 from sgbelief.graph.provenance import (
@@ -696,7 +695,7 @@ def graph_to_arrays(graph: SceneGraph) -> dict[str, np.ndarray]:
 def save_graph_npz(graph: SceneGraph, path: str | Path) -> Path:
     """Write ``graph`` as one uncompressed ``.npz`` atomically (temp file, fsync, rename)."""
     path = Path(path)
-    with _gc_paused():
+    with gc_paused():
         arrays = graph_to_arrays(graph)  # fails before touching disk
 
     def write(fh: BinaryIO) -> None:  # what np.savez writes, without its per-chunk copies
@@ -780,31 +779,6 @@ class _Archive:
             raise self.error(f"unexpected array '{extra[0]}' (not part of {FORMAT} version {VERSION})")
 
 
-@contextmanager
-def _gc_paused() -> Iterator[None]:
-    """Saving allocates millions of temporaries: pause the cyclic GC meanwhile."""
-    was = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was:
-            gc.enable()
-
-
-@contextmanager
-def _young_collections_only() -> Iterator[None]:
-    """Loading makes millions of long-lived objects. Young collections stay on (they are cheap
-    while the new objects are still in cache, and they untrack the float tuples early, so the
-    attribute dicts holding them are created untracked); full collections, which would re-traverse
-    the whole growing heap again and again, are postponed until the graph is built."""
-    t0, t1, t2 = gc.get_threshold()
-    gc.set_threshold(t0, t1, 2**30)
-    try:
-        yield
-    finally:
-        gc.set_threshold(t0, t1, t2)
-
 
 def _read_header(arch: _Archive) -> _Header:
     raw = arch.read("header", _U1, (None,))
@@ -869,7 +843,7 @@ def load_graph_npz(path: str | Path) -> SceneGraph:
         raise FormatError(f"not an .npz archive (truncated or another format): {exc}", path=path) from None
     if not isinstance(npz, np.lib.npyio.NpzFile):
         raise FormatError("a single .npy array, not an .npz scene graph archive", path=path)
-    with npz, _young_collections_only():
+    with npz, young_collections_only():
         return _load(_Archive(npz, path))
 
 
@@ -1101,7 +1075,7 @@ class _LoadedEntries:
         return entries
 
     def build(self, store: ProvenanceStore) -> None:
-        with _young_collections_only():  # ~10⁶ long-lived objects, as in the load itself
+        with young_collections_only():  # ~10⁶ long-lived objects, as in the load itself
             self._build(store)
 
     def _build(self, store: ProvenanceStore) -> None:

@@ -148,7 +148,7 @@ def _score_operator(data: RetrievalData, op_name: Any, plans: _Plans, *, tau: fl
                     registry: RelationRegistry, gt_config: RelationConfig) -> list[CompoundScore]:
     """Replay the events through one operator on a fresh graph and score every compound."""
     from sgbelief.eval.metrics import retrieval_f1
-    from sgbelief.fusion.registry import make_operator
+    from sgbelief.api.operators import make_operator
 
     geo_values, compound_plans = plans
     graph = _build_graph(data.nodes, data.vocabulary)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import gc
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -11,6 +10,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from sgbelief._fast import gc as gc_tuning
 from sgbelief.adapters.conceptgraphs.identity import IdentityMap
 from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
 
@@ -132,7 +132,7 @@ class ConceptGraphsBackend:
             self.vocabulary = ClassVocabulary.from_yaml(vocabulary)
         self.table = self.vocabulary.table()
         if isinstance(operator, str):
-            from sgbelief.fusion.registry import make_operator
+            from sgbelief.api.operators import make_operator
 
             self.operator = make_operator(operator, config=operator_config, vocabulary=self.table)
             self.operator_name = operator
@@ -486,8 +486,7 @@ class ConceptGraphsBackend:
         previous one. Cycles that become garbage after being frozen wait for ``gc.unfreeze()``
         (done by :meth:`uninstall`). See docs/performance.md, "ConceptGraphs per-frame cost".
         """
-        gc.collect()
-        gc.freeze()
+        gc_tuning.checkpoint()
         self._froze = True
 
     def end_frame(self) -> None:
@@ -542,7 +541,7 @@ class ConceptGraphsBackend:
             self._patcher.uninstall()
             self._patcher = None
         if self._froze:
-            gc.unfreeze()
+            gc_tuning.release_checkpoints()
             self._froze = False
 
     @contextlib.contextmanager
