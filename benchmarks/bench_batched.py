@@ -45,7 +45,7 @@ def main() -> int:
     from sgbelief._fast.batched import EventColumns, batched_replay
     from sgbelief.eval.replay import make_runs, replay
     from sgbelief.fusion.registry import OPERATOR_NAMES
-    from sgbelief.testing import random_records
+    from sgbelief.eval.random_stream import random_records
 
     recs, gen_s = _cpu(lambda: random_records(0, args.events, n_nodes=args.nodes))
     col_times = []

@@ -12,8 +12,8 @@ leaves (and ``update_many`` returns the reports' queue resolutions); an operator
 exactly; and the graph round-trips through save/load.
 
 ``check_fast_matches_reference(name)`` proves a shipped operator's fused engine equal to its
-reference steps. ``random_stream`` / ``random_records`` are seeded streams for tests and
-benchmarks, ``provenance_signature`` everything observable about a map (for equality tests).
+reference steps. ``random_stream`` is a seeded stream of events for tests,
+``provenance_signature`` everything observable about a map (for equality tests).
 """
 
 from __future__ import annotations
@@ -22,15 +22,11 @@ import copy
 import math
 import random
 import tempfile
-from collections.abc import Sequence
 from typing import Any
-
-import numpy as np
 
 from sgbelief._fast.batched import EventColumns, batched_replay
 from sgbelief._fast.signature import provenance_signature
 from sgbelief.api.operators import make_operator
-from sgbelief.eval.formats import EventRecord
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.events import EvidenceEvent
@@ -197,42 +193,6 @@ def check_fast_matches_reference(
     assert sorted(g_ref.nx.nodes, key=str) == sorted(g_fast.nx.nodes, key=str)
 
 
-def random_records(
-    seed: int,
-    n_events: int,
-    *,
-    n_nodes: int = 50,
-    predicates: Sequence[str] = ("is_car", "is_pedestrian", "is_building"),
-    max_targets: int = 4,
-    events_per_step: float = 3.0,
-    labels: Sequence[str | None] = ("car", "person", "building", "road", None),
-    mass_decimals: int = 4,
-) -> list[EventRecord]:
-    """A seeded random evidence stream of records (non-decreasing t) for tests and benchmarks;
-    every record is a valid event (``validate_event``): masses rounded to ``mass_decimals`` sum
-    to at most 1."""
-    rng = np.random.default_rng(seed)
-    out: list[EventRecord] = []
-    t = 0
-    preds = list(predicates)
-    labs = list(labels)
-    for i in range(n_events):
-        if rng.random() < 1.0 / events_per_step:
-            t += int(rng.integers(1, 4))
-        k = int(rng.integers(1, max_targets + 1))
-        nodes = rng.choice(n_nodes, size=min(k, n_nodes), replace=False)
-        w = rng.dirichlet(np.ones(len(nodes))) * rng.uniform(0.5, 1.0)
-        targets = {f"n{int(v):05d}": round(float(m), mass_decimals) for v, m in zip(nodes, w)}
-        if sum(targets.values()) > 1.0:  # rounding up pushed the total over 1: round these down instead
-            scale = 10.0**mass_decimals
-            targets = {n: math.floor(float(m) * scale) / scale for n, m in zip(targets, w)}
-        geo = {node: labs[int(rng.integers(len(labs)))] for node in targets}
-        out.append(EventRecord(t=t, targets=targets, predicate=preds[int(rng.integers(len(preds)))],
-                               confidence=round(float(rng.random()), 6), context="rnd", geometric=geo,
-                               id=f"r{i:07d}"))
-    return out
-
-
 def conformance_table() -> SubsumptionTable:
     """The two-predicate vocabulary :func:`random_stream` uses."""
     return _table()
@@ -243,6 +203,5 @@ __all__ = [
     "check_fusion_operator",
     "conformance_table",
     "provenance_signature",
-    "random_records",
     "random_stream",
 ]

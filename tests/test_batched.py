@@ -12,10 +12,11 @@ from hypothesis import strategies as st
 from sgbelief._fast.batched import EventColumns, batched_replay
 from sgbelief.api.operators import make_operator
 from sgbelief.eval.formats import EventRecord
+from sgbelief.eval.random_stream import random_records
 from sgbelief.eval.replay import OperatorRun, make_runs, replay
 from sgbelief.fusion.registry import OPERATOR_NAMES
 from sgbelief.graph.scene_graph import SceneGraph
-from sgbelief.testing import provenance_signature, random_records
+from sgbelief.testing import provenance_signature
 
 #: the shipped operators that declare a pair rule (the batched engine asks the operator)
 BATCHED_OPERATORS = [name for name in OPERATOR_NAMES if make_operator(name).pair_rule is not None]

@@ -9,12 +9,13 @@ from typing import Any
 import pytest
 
 from sgbelief.api.operators import engine_for, make_operator
+from sgbelief.eval.random_stream import random_records
 from sgbelief.eval.replay import make_runs, replay, score_run
 from sgbelief.fusion import registry
 from sgbelief.fusion.protocol import FusionOperator
 from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES
 from sgbelief.graph.scene_graph import SceneGraph
-from sgbelief.testing import check_fusion_operator, conformance_table, provenance_signature, random_records
+from sgbelief.testing import check_fusion_operator, conformance_table, provenance_signature
 
 TABLE = conformance_table()
 CONFIG = {"t_prov": 12, "tau_rev": 0.05, "t_cor": 4, "t_disagree": 3}

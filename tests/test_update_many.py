@@ -19,7 +19,8 @@ from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.registry import OPERATOR_NAMES
 from sgbelief.graph.persistence import graph_to_dict
 from sgbelief.graph.scene_graph import SceneGraph
-from sgbelief.testing import conformance_table, provenance_signature, random_records, random_stream
+from sgbelief.eval.random_stream import random_records
+from sgbelief.testing import conformance_table, provenance_signature, random_stream
 
 TABLE = conformance_table()
 #: short horizons so that queues time out, revisions quarantine and compaction folds in a short stream

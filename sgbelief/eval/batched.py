@@ -1,5 +1,6 @@
 """Deprecated: the batched engine moved to :mod:`sgbelief._fast.batched` (private; ``sgbelief
-replay --engine batched`` chooses it), its test helpers to :mod:`sgbelief.testing`.
+replay --engine batched`` chooses it), ``provenance_signature`` to :mod:`sgbelief.testing` and
+``random_records`` to :mod:`sgbelief.eval.random_stream`.
 
 The old names still work and warn: ``EventColumns``, ``batched_replay`` (it also takes an operator
 instance now), ``provenance_signature``, ``random_records`` and ``BATCHED_OPERATORS`` (the shipped
@@ -16,7 +17,7 @@ _MOVED = {
     "EventColumns": "sgbelief._fast.batched",
     "batched_replay": "sgbelief._fast.batched",
     "provenance_signature": "sgbelief.testing",
-    "random_records": "sgbelief.testing",
+    "random_records": "sgbelief.eval.random_stream",
 }
 #: what ``BATCHED_OPERATORS`` was: the shipped operators with a pair rule (the batched engine
 #: now asks the operator, ``operator.pair_rule``)
