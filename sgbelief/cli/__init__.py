@@ -52,8 +52,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=f"sgbelief {name}", description=COMMANDS[name][1])
     module.add_arguments(parser)
     args = parser.parse_args(rest)
+    from sgbelief.cli._console import route_messages, unroute_messages
     from sgbelief.errors import SgbeliefError
 
+    handler = route_messages(name)
     try:
         rc = int(module.run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit flush
@@ -68,6 +70,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except FileNotFoundError as exc:
         print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
         return 1
+    finally:
+        unroute_messages(handler)
 
 
 def _silence_stdout() -> None:

@@ -178,8 +178,11 @@ def _score_operator(data: RetrievalData, op_name: Any, plans: _Plans, *, tau: fl
 
 
 def evaluate_retrieval(data: RetrievalData, operators: Iterable[str], *, tau: float = 0.5,
-                       operator_config: Any = None, registry: RelationRegistry | None = None) -> list[CompoundScore]:
-    """Scores for every (named compound, operator); see the module docstring for the definitions."""
+                       operator_config: Any = None, registry: RelationRegistry | None = None,
+                       progress: Any = None) -> list[CompoundScore]:
+    """Scores for every (named compound, operator); see the module docstring for the definitions.
+
+    ``progress``, if given, is called with each operator's name once it is scored."""
     registry = registry or DEFAULT_REGISTRY
     gt_config = replace(data.config, use_committed_labels=False)
     plans = _ground_truth_plans(data, registry, gt_config)
@@ -187,6 +190,8 @@ def evaluate_retrieval(data: RetrievalData, operators: Iterable[str], *, tau: fl
     for op_name in operators:
         scores += _score_operator(data, op_name, plans, tau=tau, operator_config=operator_config,
                                   registry=registry, gt_config=gt_config)
+        if progress is not None:
+            progress(op_name)
     return scores
 
 
