@@ -49,6 +49,9 @@ class FusedBaselineEngine:
     def __repr__(self) -> str:
         return "FusedBaselineEngine()"
 
+    def __reduce__(self) -> str:
+        return "FUSED_BASELINES"  # copies and pickles are the module's one engine object
+
 
 #: the engine object of ``engine="fast"`` for the baselines (and user rules on BaseOperator)
 FUSED_BASELINES = FusedBaselineEngine()

@@ -52,6 +52,9 @@ class FusedCalibratedEngine:
     def __repr__(self) -> str:
         return "FusedCalibratedEngine()"
 
+    def __reduce__(self) -> str:
+        return "FUSED_CALIBRATED"  # copies and pickles are the module's one engine object
+
 
 #: the engine object of ``engine="fast"`` for cal / comod (and their paper variants)
 FUSED_CALIBRATED = FusedCalibratedEngine()

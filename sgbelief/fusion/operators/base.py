@@ -62,6 +62,9 @@ class ReferenceEngine:
     def __repr__(self) -> str:
         return "ReferenceEngine()"
 
+    def __reduce__(self) -> str:
+        return "REFERENCE"  # copies and pickles are the module's one engine object
+
 
 REFERENCE = ReferenceEngine()
 
