@@ -131,8 +131,8 @@ def main() -> int:
     args = ap.parse_args()
     import numpy as np
 
+    from sgbelief._fast.batched import EventColumns, batched_replay
     from sgbelief._fast.loading import FAST_LOADING
-    from sgbelief.eval.batched import EventColumns, batched_replay
     from sgbelief.fusion.compatibility import SubsumptionTable
     from sgbelief.graph.persistence import load_graph
     from sgbelief.query import QueryEngine, named_queries

@@ -26,7 +26,7 @@ _EXPORTS: dict[str, str] = {
     "OperatorConfig": "sgbelief.fusion.config",
     "FusionOperator": "sgbelief.fusion.protocol",
     "UpdateReport": "sgbelief.fusion.protocol",
-    "make_operator": "sgbelief.fusion.registry",
+    "make_operator": "sgbelief.api.operators",
     "OPERATOR_NAMES": "sgbelief.fusion.registry",
 }
 
@@ -52,7 +52,8 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from sgbelief.fusion.config import OperatorConfig
     from sgbelief.fusion.events import EvidenceEvent
     from sgbelief.fusion.protocol import FusionOperator, UpdateReport
-    from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator
+    from sgbelief.api.operators import make_operator
+    from sgbelief.fusion.registry import OPERATOR_NAMES
     from sgbelief.graph.belief import BetaBelief
     from sgbelief.graph.provenance import EntryStatus, ProvenanceStore
     from sgbelief.api.scene_graph import SceneGraph

@@ -21,7 +21,7 @@ from sgbelief.cli import main
 from sgbelief.errors import FormatError, RetractionError
 from sgbelief.fusion import queues
 from sgbelief.fusion.channel import FrameLabels
-from sgbelief.fusion.registry import make_operator
+from sgbelief.api.operators import make_operator
 from sgbelief.graph.binary import FORMAT, graph_to_arrays, load_graph_npz
 from sgbelief.graph.npz_archive import CHUNK
 from sgbelief.graph.npz_columns import pylist

@@ -17,7 +17,7 @@ from sgbelief._fast.folds import fold_journal_records, retired_ids
 from sgbelief._fast.journal import JournalledProvenanceStore
 from sgbelief.errors import RetractionError
 from sgbelief.graph.provenance import EntryStatus, ProvenanceStore
-from sgbelief.testing import apply_store_operations, check_store_matches_reference
+from sgbelief.testing import apply_store_operations, check_store_matches_reference, provenance_signature
 
 _NODES = ["a", "b", "c"]
 _PREDS = ["is_p", "is_q"]

@@ -10,7 +10,7 @@ import pytest
 
 from sgbelief.errors import FormatError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion.compatibility import SubsumptionTable
-from sgbelief.fusion.registry import make_operator
+from sgbelief.api.operators import make_operator
 from sgbelief.graph.provenance import EntryStatus
 from sgbelief import SceneGraph
 from sgbelief.testing import conformance_table, random_stream

@@ -29,13 +29,14 @@ from typing import Any
 
 import numpy as np
 
+from sgbelief.api.operators import make_operator
 from sgbelief.eval.formats import EventRecord
 from sgbelief.eval.metrics import conformal_coverage, reliability_bins
 from sgbelief.eval.replay import OperatorRun, OperatorScores, make_runs, replay, score_run, to_event
 from sgbelief.fusion.calibration import MondrianCalibrator
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
-from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES, make_operator
+from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES
 from sgbelief.graph.belief import BetaBelief
 from sgbelief.graph.persistence import atomic_write_text
 from sgbelief.api.scene_graph import SceneGraph

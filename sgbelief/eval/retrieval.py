@@ -33,7 +33,7 @@ from sgbelief.eval.parallel import run_scenes
 from sgbelief.fusion.channel import RecordedChannel
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.events import EvidenceEvent
-from sgbelief.fusion.registry import make_operator
+from sgbelief.api.operators import make_operator
 from sgbelief.query.engine import BELIEF, GEOMETRIC, QueryEngine
 from sgbelief.query.named import NamedQuery, load_query_set, named_queries
 from sgbelief.query.relations import DEFAULT_REGISTRY, RelationConfig, RelationRegistry

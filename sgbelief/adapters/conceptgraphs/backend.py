@@ -8,11 +8,11 @@ of the detected ConceptGraphs generation through :class:`~.patching.Patcher`.
 from __future__ import annotations
 
 import contextlib
-import gc
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from sgbelief._fast import gc as gc_tuning
 from sgbelief.adapters.conceptgraphs.functions import GenerationFunctions, make_functions
 from sgbelief.adapters.conceptgraphs.map_beliefs import (
     DEFAULT_LABEL_KEY,
@@ -83,7 +83,7 @@ class ConceptGraphsBackend(MapBeliefs):
         else:
             vocab = ClassVocabulary.from_yaml(vocabulary)
         if isinstance(operator, str):
-            from sgbelief.fusion.registry import make_operator
+            from sgbelief.api.operators import make_operator
 
             op = make_operator(operator, config=operator_config, vocabulary=vocab.table())
             self.operator_name = operator
@@ -110,8 +110,7 @@ class ConceptGraphsBackend(MapBeliefs):
         previous one. Cycles that become garbage after being frozen wait for ``gc.unfreeze()``
         (done by :meth:`uninstall`). See docs/performance.md, "ConceptGraphs per-frame cost".
         """
-        gc.collect()
-        gc.freeze()
+        gc_tuning.checkpoint()
         self._froze = True
 
     def end_frame(self) -> None:
@@ -144,7 +143,7 @@ class ConceptGraphsBackend(MapBeliefs):
             self._patcher.uninstall()
             self._patcher = None
         if self._froze:
-            gc.unfreeze()
+            gc_tuning.release_checkpoints()
             self._froze = False
 
     @contextlib.contextmanager
