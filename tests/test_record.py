@@ -124,8 +124,6 @@ def test_log_frame_into_the_users_recording(tmp_path: Path) -> None:
     rr = pytest.importorskip("rerun")
     from sgbelief.adapters.conceptgraphs.backend import ConceptGraphsBackend
     from sgbelief.adapters.conceptgraphs.importer import import_result
-    from sgbelief.viz.rerun_log import log_frame
-
     backend = ConceptGraphsBackend("comod")
     results = {"objects": [_cg_object([0, 0, 1, 0], [0.9, 0.8, 0.6, 0.85], [0, 1, 2, 3], (0.0, 0.0, 0.5), 1),
                            _cg_object([1, 1, 1], [0.9, 0.7, 0.8], [1, 2, 3], (2.0, 1.0, 0.4), 2)],
@@ -136,7 +134,7 @@ def test_log_frame_into_the_users_recording(tmp_path: Path) -> None:
     rec.save(str(path))
     rec.set_time("t", sequence=3)
     rec.log("camera/rgb", rr.Points3D(np.zeros((1, 3))))  # what the user's own script logs
-    n = log_frame(backend.graph, 3, recording=rec)
+    n = backend.log_to_rerun(3, recording=rec)  # = log_frame(backend.graph, 3, recording=rec, tau=backend.tau)
     rec.flush()
     rec.disconnect()
     ents = _read(path)

@@ -159,6 +159,14 @@ class ConceptGraphsBackend(MapBeliefs):
     def generation(self) -> str | None:
         return None if self._patcher is None else self._patcher.generation
 
+    def log_to_rerun(self, frame: int, *, recording: Any = None, prefix: str = "sgbelief", timeline: str = "t") -> int:
+        """Log the map as it stands after ``frame`` into the current rerun recording (or ``recording``):
+        boxes with committed label and P, every belief's mean, the claims refused in this frame.
+        Needs ``sgbelief[rerun]``; see docs/visualisation.md. Returns the number of entities logged."""
+        from sgbelief.viz.rerun_log import log_frame
+
+        return log_frame(self.graph, frame, recording=recording, prefix=prefix, tau=self.tau, timeline=timeline)
+
     def save(self, path: str | Path) -> Path:
         """Save the belief graph (SceneGraph JSON)."""
         from sgbelief.graph.persistence import save_graph
