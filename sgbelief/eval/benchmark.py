@@ -64,10 +64,11 @@ def _noop(_: str) -> None:
 
 
 # ----------------------------------------------------------------------------- replays
-def _run(
+def score_operators(
     events: Sequence[EventRecord], operators: Sequence[str], table: SubsumptionTable, truth: dict, preds: Sequence[str],
     config: OperatorConfig,
 ) -> dict[str, OperatorScores]:
+    """Each operator's scores on ``events`` (one replay; the grid scores its cells with this)."""
     return _replay(events, operators, table, truth, preds, config)[0]
 
 
@@ -427,7 +428,7 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
     res["belief_preservation_pool"] = len(pool)
     cal_report = trace = None
     progress(f"{name}: six operators, vlm_a + segmenter channel")
-    seg = _run(suite.events_for("vlm_a", "segmenter"), operators + paper, table, suite.truth, preds, config)
+    seg = score_operators(suite.events_for("vlm_a", "segmenter"), operators + paper, table, suite.truth, preds, config)
     res["table2_segmenter"] = _scores_dict(seg)
     if "comod" in operators:
         res["table5"] = {"oracle": main["comod"].as_dict(), "segmenter": seg["comod"].as_dict(),
