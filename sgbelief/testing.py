@@ -30,7 +30,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from sgbelief._fast.batched import EventColumns, batched_replay
-from sgbelief._fast.signature import provenance_signature
+from sgbelief._fast.signature import float_bits, provenance_signature
 from sgbelief.api.operators import make_operator
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
@@ -210,18 +210,9 @@ def conformance_table() -> SubsumptionTable:
 StoreOperation = tuple[Any, ...]
 
 
-def _bits(x: Any) -> Any:
-    """Floats as their exact hex form (tells -0.0 from 0.0), containers recursively."""
-    if isinstance(x, float):
-        return x.hex()
-    if isinstance(x, (list, tuple)):
-        return [_bits(v) for v in x]
-    return x
-
-
 def entry_state(entry: ProvenanceEntry) -> list[Any]:
     """Every field of an entry, floats bit for bit."""
-    return _bits([entry.event_id, entry.t, entry.d_alpha, entry.d_beta, entry.status.value, entry.stance,
+    return float_bits([entry.event_id, entry.t, entry.d_alpha, entry.d_beta, entry.status.value, entry.stance,
                   entry.corroborated_by, entry.n_folded, entry.node, entry.predicate, entry.alive])
 
 
@@ -239,10 +230,10 @@ def store_state(store: ProvenanceStore) -> dict[str, Any]:
               *(e for e in (*store.quarantine, *store.disagreement) if e.alive)):
         assert id(e) in logged, f"{e!r} is indexed or queued but in no log"
     return {
-        "prior": _bits([store.prior_alpha, store.prior_beta]),
+        "prior": float_bits([store.prior_alpha, store.prior_beta]),
         "remember_compacted": store.remember_compacted,
         "n_compacted": store.n_compacted,
-        "pairs": [(key, _bits(log.alpha), _bits(log.beta), [entry_state(e) for e in log.entries])
+        "pairs": [(key, float_bits(log.alpha), float_bits(log.beta), [entry_state(e) for e in log.entries])
                   for key, log in logs.items()],
         "event_index": [(eid, [entry_state(e) for e in es]) for eid, es in index.items()],
         "timeline": [entry_state(e) for e in timeline],
@@ -250,7 +241,7 @@ def store_state(store: ProvenanceStore) -> dict[str, Any]:
         "disagreement": [entry_state(e) for e in store.disagreement],
         "pending": [(key, [entry_state(e) for e in store.pending(*key)]) for key in logs if store.pending(*key)],
         "compacted_ids": store.compacted_ids(),
-        "to_dict": _bits(store.to_dict()),
+        "to_dict": float_bits(store.to_dict()),
     }
 
 
@@ -304,7 +295,7 @@ def apply_store_operations(store: ProvenanceStore, operations: Sequence[StoreOpe
                 raise ValueError(f"unknown store operation {kind!r}")
         except RetractionError as exc:
             out.append(f"RetractionError: {exc}")
-        out.append({k: _bits(store.alpha_beta(*k)) for k in store.pairs()})
+        out.append({k: float_bits(store.alpha_beta(*k)) for k in store.pairs()})
     return out
 
 

@@ -14,12 +14,12 @@ from sgbelief.graph.provenance import ProvenanceEntry
 from sgbelief.graph.scene_graph import SceneGraph
 
 
-def _bits(x: Any) -> Any:
+def float_bits(x: Any) -> Any:
     """Floats as their exact hex form (tells -0.0 from 0.0), containers recursively."""
     if isinstance(x, float):
         return x.hex()
     if isinstance(x, (list, tuple)):
-        return [_bits(v) for v in x]
+        return [float_bits(v) for v in x]
     return x
 
 
@@ -30,14 +30,14 @@ def provenance_signature(graph: SceneGraph) -> dict[str, Any]:
     prov.materialize()
 
     def entry(e: ProvenanceEntry) -> Any:
-        return _bits([e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by,
+        return float_bits([e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by,
                       e.n_folded, e.node, e.predicate, e.alive])
 
     return {
         "nodes": [(n, dict(a)) for n, a in graph.nx.nodes(data=True)],
         "clock": graph.clock,
         "meta": dict(graph.meta),
-        "pairs": [(key, _bits(log.alpha), _bits(log.beta), [entry(e) for e in log.entries])
+        "pairs": [(key, float_bits(log.alpha), float_bits(log.beta), [entry(e) for e in log.entries])
                   for key, log in prov._pairs.items()],
         "quarantine": [entry(e) for e in prov.quarantine],
         "disagreement": [entry(e) for e in prov.disagreement],
