@@ -41,6 +41,7 @@ from sgbelief.graph.provenance_log import (
     COUNTED,
     PENDING,
     EntryStatus,
+    FoldSummary,
     PairLog,
     ProvenanceEntry,
     belief_from_entries,
@@ -59,6 +60,7 @@ __all__ = [
     "COUNTED",
     "PENDING",
     "EntryStatus",
+    "FoldSummary",
     "Node",
     "PairKey",
     "PairLog",
@@ -76,6 +78,31 @@ _STATUS_BY_VALUE = {s.value: s for s in EntryStatus}
 # members read once (an attribute lookup on an Enum class runs Python code)
 _COMMITTED, _COMPACTED = EntryStatus.COMMITTED, EntryStatus.COMPACTED
 _QUARANTINED, _REFUSED = EntryStatus.QUARANTINED, EntryStatus.REFUSED
+
+
+def _bucket_summary(entries: Iterable[ProvenanceEntry]) -> FoldSummary | None:
+    """The fold summary of a log's compacted bucket (None without a bucket or a summary)."""
+    for e in entries:
+        if e.status is _COMPACTED:
+            return e.summary
+    return None
+
+
+def _attach_summary(entries: list[ProvenanceEntry], summary: FoldSummary, where: str) -> None:
+    """Give a loaded log's bucket its saved fold summary."""
+    for e in entries:
+        if e.status is _COMPACTED:
+            e.summary = summary
+            return
+    raise FormatError(f"{where}.fold_summary: the pair has no compacted entry to summarise")
+
+
+def _merged_summary(head: ProvenanceEntry, extra: ProvenanceEntry) -> FoldSummary:
+    """The summary of two buckets merged into one (migration), ``head`` first."""
+    merged = FoldSummary({}, None, None, None)
+    for bucket, n in ((head, head.n_folded - extra.n_folded), (extra, extra.n_folded)):
+        merged.absorb(bucket.summary if bucket.summary is not None else FoldSummary.unknown(n))
+    return merged
 
 
 class ProvenanceStore:
@@ -474,6 +501,7 @@ class ProvenanceStore:
                     head.d_alpha = math.fsum((head.d_alpha, extra.d_alpha))
                     head.d_beta = math.fsum((head.d_beta, extra.d_beta))
                     head.n_folded += extra.n_folded
+                    head.summary = _merged_summary(head, extra)
                     head.t = max(head.t, extra.t)
                     extra.alive = False
                 merged = [e for e in merged if e.alive]
@@ -487,18 +515,21 @@ class ProvenanceStore:
         """A JSON-ready dict (node ids must be str or int)."""
         pairs = []
         for (node, predicate), log in self.logs().items():
-            pairs.append(
-                {
-                    "node": node,
-                    "predicate": predicate,
-                    "alpha": log.alpha,
-                    "beta": log.beta,
-                    "entries": [
-                        [e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by, e.n_folded]
-                        for e in log.entries
-                    ],
-                }
-            )
+            pair: dict[str, Any] = {
+                "node": node,
+                "predicate": predicate,
+                "alpha": log.alpha,
+                "beta": log.beta,
+                "entries": [
+                    [e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by, e.n_folded]
+                    for e in log.entries
+                ],
+            }
+            summary = _bucket_summary(log.entries)
+            if summary is not None:
+                # optional: older readers ignore it, and files without it load with unknown counts
+                pair["fold_summary"] = summary.to_dict()
+            pairs.append(pair)
         return {
             "prior": [self.prior_alpha, self.prior_beta],
             "pairs": pairs,
@@ -528,6 +559,8 @@ class ProvenanceStore:
                     e.corroborated_by = list(corr) if corr else None
                     e.n_folded = int(n_folded)
                     log.entries.append(e)
+                if pair.get("fold_summary") is not None:
+                    _attach_summary(log.entries, FoldSummary.from_dict(pair["fold_summary"]), f"{where}.pairs[{i}]")
                 rebuilt = belief_from_entries(prior, log.entries)
                 for name, stored, value in zip(("alpha", "beta"), (pair["alpha"], pair["beta"]), rebuilt):
                     if not math.isclose(float(stored), value, rel_tol=1e-9, abs_tol=1e-9):
