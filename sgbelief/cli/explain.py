@@ -25,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--limit", type=int, default=40,
                    help="show at most this many live events per predicate in the text output, the "
                         "first and last halves (default 40; 0 = all); --json always lists all")
-    p.add_argument("--json", action="store_true", help="machine-readable output (the same data)")
+    p.add_argument("--json", action="store_true", help="machine-readable output, the same data (default: a text story)")
 
 
 def _node_id(graph: Any, raw: str) -> Any:
