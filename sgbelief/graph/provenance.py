@@ -44,11 +44,14 @@ from sgbelief.graph.provenance_log import (
     FoldSummary,
     PairLog,
     ProvenanceEntry,
+    attach_summary,
     belief_from_entries,
+    bucket_summary,
     event_list,
     fold_into_bucket,
     index_event,
     merge_into_bucket,
+    merged_summary,
     settled_before,
 )
 
@@ -78,31 +81,6 @@ _STATUS_BY_VALUE = {s.value: s for s in EntryStatus}
 # members read once (an attribute lookup on an Enum class runs Python code)
 _COMMITTED, _COMPACTED = EntryStatus.COMMITTED, EntryStatus.COMPACTED
 _QUARANTINED, _REFUSED = EntryStatus.QUARANTINED, EntryStatus.REFUSED
-
-
-def _bucket_summary(entries: Iterable[ProvenanceEntry]) -> FoldSummary | None:
-    """The fold summary of a log's compacted bucket (None without a bucket or a summary)."""
-    for e in entries:
-        if e.status is _COMPACTED:
-            return e.summary
-    return None
-
-
-def _attach_summary(entries: list[ProvenanceEntry], summary: FoldSummary, where: str) -> None:
-    """Give a loaded log's bucket its saved fold summary."""
-    for e in entries:
-        if e.status is _COMPACTED:
-            e.summary = summary
-            return
-    raise FormatError(f"{where}.fold_summary: the pair has no compacted entry to summarise")
-
-
-def _merged_summary(head: ProvenanceEntry, extra: ProvenanceEntry) -> FoldSummary:
-    """The summary of two buckets merged into one (migration), ``head`` first."""
-    merged = FoldSummary({}, None, None, None)
-    for bucket, n in ((head, head.n_folded - extra.n_folded), (extra, extra.n_folded)):
-        merged.absorb(bucket.summary if bucket.summary is not None else FoldSummary.unknown(n))
-    return merged
 
 
 class ProvenanceStore:
@@ -501,7 +479,7 @@ class ProvenanceStore:
                     head.d_alpha = math.fsum((head.d_alpha, extra.d_alpha))
                     head.d_beta = math.fsum((head.d_beta, extra.d_beta))
                     head.n_folded += extra.n_folded
-                    head.summary = _merged_summary(head, extra)
+                    head.summary = merged_summary(head, extra)
                     head.t = max(head.t, extra.t)
                     extra.alive = False
                 merged = [e for e in merged if e.alive]
@@ -525,7 +503,7 @@ class ProvenanceStore:
                     for e in log.entries
                 ],
             }
-            summary = _bucket_summary(log.entries)
+            summary = bucket_summary(log.entries)
             if summary is not None:
                 # optional: older readers ignore it, and files without it load with unknown counts
                 pair["fold_summary"] = summary.to_dict()
@@ -560,7 +538,7 @@ class ProvenanceStore:
                     e.n_folded = int(n_folded)
                     log.entries.append(e)
                 if pair.get("fold_summary") is not None:
-                    _attach_summary(log.entries, FoldSummary.from_dict(pair["fold_summary"]), f"{where}.pairs[{i}]")
+                    attach_summary(log.entries, FoldSummary.from_dict(pair["fold_summary"]), f"{where}.pairs[{i}]")
                 rebuilt = belief_from_entries(prior, log.entries)
                 for name, stored, value in zip(("alpha", "beta"), (pair["alpha"], pair["beta"]), rebuilt):
                     if not math.isclose(float(stored), value, rel_tol=1e-9, abs_tol=1e-9):

@@ -272,6 +272,31 @@ def merge_into_bucket(
     return bucket
 
 
+def bucket_summary(entries: Iterable[ProvenanceEntry]) -> FoldSummary | None:
+    """The fold summary of a log's compacted bucket (None without a bucket or a summary)."""
+    for e in entries:
+        if e.status is _COMPACTED:
+            return e.summary
+    return None
+
+
+def attach_summary(entries: list[ProvenanceEntry], summary: FoldSummary, where: str) -> None:
+    """Give a loaded log's bucket its saved fold summary."""
+    for e in entries:
+        if e.status is _COMPACTED:
+            e.summary = summary
+            return
+    raise ValueError(f"{where}.fold_summary: the pair has no compacted entry to summarise")
+
+
+def merged_summary(head: ProvenanceEntry, extra: ProvenanceEntry) -> FoldSummary:
+    """The summary of two buckets merged into one (migration), ``head`` first."""
+    merged = FoldSummary({}, None, None, None)
+    for bucket, n in ((head, head.n_folded - extra.n_folded), (extra, extra.n_folded)):
+        merged.absorb(bucket.summary if bucket.summary is not None else FoldSummary.unknown(n))
+    return merged
+
+
 # ------------------------------------------------------------------ a pair's log
 def event_list(found: ProvenanceEntry | list[ProvenanceEntry] | None) -> list[ProvenanceEntry]:
     """A value of the event index as a (new) list of entries."""
