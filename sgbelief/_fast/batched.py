@@ -49,7 +49,7 @@ from sgbelief.fusion.operators.compaction import CompactionSchedule
 from sgbelief.fusion.protocol import FusionOperator, LinearRule, PairRule, ResetRule, increment_stance, new_stats
 from sgbelief.fusion.registry import make_operator
 from sgbelief._fast.journal import add_logs, extend_timeline, remember_compacted_ids, set_event_index
-from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore
+from sgbelief.graph.provenance import EntryStatus, FoldSummary, ProvenanceEntry, ProvenanceStore
 from sgbelief.graph.scene_graph import SceneGraph
 
 
@@ -221,7 +221,7 @@ def _increments(rule: PairRule, mass: np.ndarray, conf: np.ndarray, waves: _Wave
     return da, db, alpha, beta
 
 
-_Buckets = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+_Buckets = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def _fold(waves: _Waves, pair: np.ndarray, n_pairs: int, fold_k: np.ndarray, t_entry: np.ndarray,
@@ -246,7 +246,8 @@ def _fold(waves: _Waves, pair: np.ndarray, n_pairs: int, fold_k: np.ndarray, t_e
     at = np.empty(n_pairs, dtype=np.int64)
     at[fp[p_first]] = np.arange(len(p_first))
     rows = at[stages.rows]
-    return stages.rows, t_entry[folded[p_last]][rows], b_alpha, b_beta, (p_last - p_first + 1)[rows]
+    return (stages.rows, t_entry[folded[p_last]][rows], b_alpha, b_beta, (p_last - p_first + 1)[rows],
+            folded[p_first][rows], folded[p_last][rows])
 
 
 class _Laps:
@@ -504,12 +505,18 @@ def _replay_waves(cols: EventColumns, rule: PairRule, tau_t: float, schedule: Co
     entries: list[list[ProvenanceEntry]] = [[] for _ in seq_keys]
     entries_of: dict[int, list[ProvenanceEntry]] = dict(zip(pair_seq.tolist(), entries))
     if buckets is not None:
-        b_pair, b_t, b_alpha, b_beta, b_n = buckets
+        b_pair, b_t, b_alpha, b_beta, b_n, b_first, b_last = buckets
         b_keys = list(map(keys.__getitem__, b_pair.tolist()))
         made = map(ProvenanceEntry, repeat(None), b_t.tolist(), b_alpha.tolist(), b_beta.tolist(),
                    repeat(EntryStatus.COMPACTED), [k[0] for k in b_keys], [k[1] for k in b_keys])
-        for p, bucket, n_folded in zip(b_pair.tolist(), made, b_n.tolist()):
+        # what each bucket folded: committed entries only (pair rules commit every event)
+        ids = cols.event_ids
+        first_ids = list(map(ids.__getitem__, ev[b_first].tolist()))
+        last_ids = list(map(ids.__getitem__, ev[b_last].tolist()))
+        for p, bucket, n_folded, t_first, first_id, last_id in zip(
+                b_pair.tolist(), made, b_n.tolist(), t_entry[b_first].tolist(), first_ids, last_ids):
             bucket.n_folded = n_folded
+            bucket.summary = FoldSummary.committed(n_folded, t_first, first_id, last_id)
             entries_of[p].append(bucket)
     # live entries (the last T_prov steps): logs, timeline, event index
     live_ev = ev[n_fold:]

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from itertools import chain
 from operator import itemgetter
 from typing import Any
@@ -30,6 +30,7 @@ import numpy as np
 from sgbelief.graph.provenance import (
     COUNTED,
     EntryStatus,
+    FoldSummary,
     PairKey,
     PairLog,
     ProvenanceEntry,
@@ -96,6 +97,15 @@ def retired_ids(
                 remaining[eid] = left - 1
     gone += entry_ids[done:]
     return gone
+
+
+def _records_summary(recs: Sequence[JournalRecord], n: int | None = None) -> FoldSummary:
+    """The fold summary of journal records (committed, in time order): ``recs`` holds them all,
+    or, with ``n`` given, only the first and the last of the ``n``. The first event id is the
+    first record's with an id, as :meth:`FoldSummary.of_entries` takes it."""
+    first = next((r[1] for r in recs if r[1] is not None), None)
+    last = next((r[1] for r in reversed(recs) if r[1] is not None), None)
+    return FoldSummary.committed(len(recs) if n is None else n, recs[0][2], first, last)
 
 
 def fold_with_journal(store: Any, before_t: int, n_old: int, raws: list[JournalRecord]) -> int:
@@ -186,7 +196,10 @@ def fold_with_journal(store: Any, before_t: int, n_old: int, raws: list[JournalR
                 n += len(recs)
             d_alpha = fsum(das)
             d_beta = fsum(dbs)
-        bucket = merge_into_bucket(bucket, key[0], key[1], t_max, d_alpha, d_beta, n)
+        summary = FoldSummary.of_entries(fold)
+        if recs:
+            summary.absorb(_records_summary(recs))
+        bucket = merge_into_bucket(bucket, key[0], key[1], t_max, d_alpha, d_beta, n, summary)
         for entry in fold:
             entry.alive = False
             if unindex(entry):
@@ -268,11 +281,20 @@ def fold_journal_records(store: Any, raws: list[JournalRecord]) -> int | None:
     if not (np.isfinite(sa).all() and np.isfinite(sb).all()):
         return None
     # ---- nothing has changed so far
-    for log, d_alpha, d_beta, c, t_max, i in zip(glogs, sa.tolist(), sb.tolist(), n.tolist(),
-                                                 t_last.tolist(), head):
+    tail = list(range(m)) if order is None else order[ends - 1].tolist()
+    for log, d_alpha, d_beta, c, t_max, i, j in zip(glogs, sa.tolist(), sb.tolist(), n.tolist(),
+                                                    t_last.tolist(), head, tail):
         entries = log.entries  # type: ignore[union-attr]
         key = raws[i][0]
-        bucket = merge_into_bucket(entries[0] if entries else None, key[0], key[1], t_max, d_alpha, d_beta, c)
+        if order is None:
+            summary = _records_summary((raws[i],))
+        elif raws[i][1] is None or raws[j][1] is None:  # rare: scan the pair's records for ids
+            g = slot[log]  # type: ignore[index]
+            summary = _records_summary([raws[r] for r in order[starts[g]:ends[g]].tolist()])
+        else:
+            summary = _records_summary((raws[i], raws[j]), c)
+        bucket = merge_into_bucket(entries[0] if entries else None, key[0], key[1], t_max, d_alpha, d_beta, c,
+                                   summary)
         if not entries:
             log.entries = [bucket]  # type: ignore[union-attr]
     eids = list(map(record_event_id, raws))

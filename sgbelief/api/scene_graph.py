@@ -8,6 +8,7 @@ the layers that own them::
     g.save(path)                 # sgbelief.graph.persistence.save_graph(g, path)
     SceneGraph.load(path)        # sgbelief.graph.persistence.load_graph(path, graph_type=SceneGraph, loading=...)
     g.query("is_chair & !is_near_window")   # sgbelief.query.run_query(g, expr)
+    g.explain(node, "is_chair")  # sgbelief.graph.story.explain(g, node, predicate)
 
 and chooses the provenance store: ``engine="fast"`` (the default) or ``engine="reference"`` (the
 plain log of Eq. 5). ``sgbelief.SceneGraph`` is this class.
@@ -26,6 +27,7 @@ from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA
 from sgbelief.graph.loading import REFERENCE_LOADING, GraphLoading
 from sgbelief.graph.persistence import load_graph, save_graph
 from sgbelief.graph.provenance import ProvenanceStore
+from sgbelief.graph.story import BeliefStory, explain
 from sgbelief.query.engine import QueryResult, run_query
 
 __all__ = ["SceneGraph", "Engine", "ENGINES"]
@@ -91,3 +93,9 @@ class SceneGraph(model.SceneGraph):
     def query(self, expr: Any, **kwargs: Any) -> QueryResult:
         """Answer a compound query: :func:`sgbelief.query.run_query` on this graph."""
         return run_query(self, expr, **kwargs)
+
+    def explain(self, node: Any, predicate: str, *, tau: float = 0.5) -> BeliefStory:
+        """The story of one belief: every provenance entry of (node, predicate) in time order,
+        what compaction folded (counts per status, time range, first and last event ids), and
+        why the pair is or is not committed at ``tau`` (:func:`sgbelief.graph.story.explain`)."""
+        return explain(self, node, predicate, tau=tau)

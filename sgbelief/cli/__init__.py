@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "retrieval": ("sgbelief.cli.retrieval", "compound-query retrieval F1 per operator"),
     "import-cg": ("sgbelief.cli.import_cg", "import a saved ConceptGraphs map and replay its detections"),
     "inspect": ("sgbelief.cli.inspect", "show a saved graph's beliefs and provenance"),
+    "explain": ("sgbelief.cli.explain", "a belief's story: every event of a (node, predicate), and why it is committed"),
     "vocab": ("sgbelief.cli.vocab", "check an open-vocabulary class list: what contradicts what"),
     "show": ("sgbelief.cli.show", "draw a saved map top-down (PNG), or one element's belief trace"),
     "record": ("sgbelief.cli.record", "replay an evidence log into a rerun recording (.rrd; sgbelief[rerun])"),

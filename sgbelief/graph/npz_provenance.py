@@ -16,6 +16,7 @@ the checked columns; a store that builds its entries later starts from the same 
 
 from __future__ import annotations
 
+import json
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from itertools import chain, repeat
@@ -34,7 +35,15 @@ from sgbelief.graph.npz_columns import (
     pylist,
     read_strings_later,
 )
-from sgbelief.graph.provenance import COUNTED, PENDING, EntryStatus, PairLog, ProvenanceEntry, ProvenanceStore
+from sgbelief.graph.provenance import (
+    COUNTED,
+    PENDING,
+    EntryStatus,
+    FoldSummary,
+    PairLog,
+    ProvenanceEntry,
+    ProvenanceStore,
+)
 
 #: the store's entries: every status, in the order of their codes in a file written now
 STATUSES = list(EntryStatus)
@@ -134,6 +143,12 @@ def provenance_arrays(
     arrays["quarantine"] = q[status[q] == STATUSES.index(EntryStatus.QUARANTINED)]
     d = positions(store.disagreement, sorted_ids, order)
     arrays["disagreement"] = d[status[d] == STATUSES.index(EntryStatus.REFUSED)]
+    # ---- what each compacted bucket folded (optional arrays: files without them load as unknown)
+    summarised = [i for i, e in enumerate(flat) if e.summary is not None]
+    if summarised:
+        arrays["fold_summary_entry"] = np.asarray(summarised, dtype=I8)
+        texts = [json.dumps(flat[i].summary.to_dict(), separators=(",", ":")) for i in summarised]  # type: ignore[union-attr]
+        arrays.update({f"fold_summary{s}": a for s, a in encode_strings(texts, lambda i: "fold summary").items()})
     compacted = store.compacted_ids()
     arrays.update({f"compacted_ids{s}": a
                    for s, a in encode_strings(compacted, lambda i: "compacted event id").items()})
@@ -221,6 +236,8 @@ class ProvenanceColumns:
         self.corr_entry, self.corr_len, self.corr_ids = corr_entry, corr_len, corr_ids
         self.timeline, self.quarantine, self.disagreement = timeline, quarantine, disagreement
         self.compacted_ids = compacted_ids
+        #: entry index -> the saved fold summary (a dict) of that compacted bucket
+        self.fold_summaries: dict[int, dict[str, Any]] = {}
 
     @property
     def n_entries(self) -> int:
@@ -266,6 +283,16 @@ class ProvenanceColumns:
             for i, a, b in zip(where[self.corr_entry].tolist(), bounds[:-1].tolist(), bounds[1:].tolist()):
                 if i >= 0:
                     entries[i].corroborated_by = self.corr_ids[a:b]
+        if self.fold_summaries:
+            if rows is None:
+                for i, d in self.fold_summaries.items():
+                    entries[i].summary = FoldSummary.from_dict(d)
+            else:
+                at_row = {r: j for j, r in enumerate(rows.tolist())}
+                for i, d in self.fold_summaries.items():
+                    j = at_row.get(i)
+                    if j is not None:
+                        entries[j].summary = FoldSummary.from_dict(d)
         return entries
 
     def split(self, entries: list[Any]) -> Iterable[list[Any]]:
@@ -357,9 +384,31 @@ def read_provenance(arch: NpzArchive, h: ProvenanceHeader, node_ids: list[Any]) 
     pair_nodes = node_arr[pair_node]
     pair_preds = pred_arr[pair_pred]
     pair_keys = list(zip(pair_nodes.tolist(), pair_preds.tolist()))
-    return ProvenanceColumns(h, arch.error, pair_keys, pair_nodes, pair_preds, alpha, beta, lengths, t, da, db,
+    cols = ProvenanceColumns(h, arch.error, pair_keys, pair_nodes, pair_preds, alpha, beta, lengths, t, da, db,
                              status, stance, n_folded, null, eids, corr_entry, corr_len, corr_ids, timeline,
                              queues["quarantine"], queues["disagreement"], compacted)
+    cols.fold_summaries = _read_fold_summaries(arch, m, status, statuses)
+    return cols
+
+
+def _read_fold_summaries(arch: NpzArchive, m: int, status: np.ndarray, statuses: list[EntryStatus]
+                         ) -> dict[int, dict[str, Any]]:
+    """The optional fold summaries of the compacted buckets (absent in older files: unknown)."""
+    if not arch.has("fold_summary_entry"):
+        return {}
+    idx = arch.read("fold_summary_entry", I8, (None,))
+    check_index(arch, "fold_summary_entry", idx, m)
+    if len(idx) and not all(statuses[s] is EntryStatus.COMPACTED for s in np.unique(status[idx]).tolist()):
+        raise arch.error("array 'fold_summary_entry': refers to an entry whose status is not 'compacted'")
+    values = decode_values(arch, "fold_summary", {"kind": "json"}, len(idx))
+    out: dict[int, dict[str, Any]] = {}
+    for row, (i, d) in enumerate(zip(idx.tolist(), values)):
+        try:
+            FoldSummary.from_dict(d)
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise arch.error(f"array 'fold_summary' row {row}: malformed fold summary ({exc})") from None
+        out[i] = d
+    return out
 
 
 def build_reference_store(cols: ProvenanceColumns) -> ProvenanceStore:

@@ -41,13 +41,17 @@ from sgbelief.graph.provenance_log import (
     COUNTED,
     PENDING,
     EntryStatus,
+    FoldSummary,
     PairLog,
     ProvenanceEntry,
+    attach_summary,
     belief_from_entries,
+    bucket_summary,
     event_list,
     fold_into_bucket,
     index_event,
     merge_into_bucket,
+    merged_summary,
     settled_before,
 )
 
@@ -59,6 +63,7 @@ __all__ = [
     "COUNTED",
     "PENDING",
     "EntryStatus",
+    "FoldSummary",
     "Node",
     "PairKey",
     "PairLog",
@@ -474,6 +479,7 @@ class ProvenanceStore:
                     head.d_alpha = math.fsum((head.d_alpha, extra.d_alpha))
                     head.d_beta = math.fsum((head.d_beta, extra.d_beta))
                     head.n_folded += extra.n_folded
+                    head.summary = merged_summary(head, extra)
                     head.t = max(head.t, extra.t)
                     extra.alive = False
                 merged = [e for e in merged if e.alive]
@@ -487,18 +493,21 @@ class ProvenanceStore:
         """A JSON-ready dict (node ids must be str or int)."""
         pairs = []
         for (node, predicate), log in self.logs().items():
-            pairs.append(
-                {
-                    "node": node,
-                    "predicate": predicate,
-                    "alpha": log.alpha,
-                    "beta": log.beta,
-                    "entries": [
-                        [e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by, e.n_folded]
-                        for e in log.entries
-                    ],
-                }
-            )
+            pair: dict[str, Any] = {
+                "node": node,
+                "predicate": predicate,
+                "alpha": log.alpha,
+                "beta": log.beta,
+                "entries": [
+                    [e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by, e.n_folded]
+                    for e in log.entries
+                ],
+            }
+            summary = bucket_summary(log.entries)
+            if summary is not None:
+                # optional: older readers ignore it, and files without it load with unknown counts
+                pair["fold_summary"] = summary.to_dict()
+            pairs.append(pair)
         return {
             "prior": [self.prior_alpha, self.prior_beta],
             "pairs": pairs,
@@ -528,6 +537,8 @@ class ProvenanceStore:
                     e.corroborated_by = list(corr) if corr else None
                     e.n_folded = int(n_folded)
                     log.entries.append(e)
+                if pair.get("fold_summary") is not None:
+                    attach_summary(log.entries, FoldSummary.from_dict(pair["fold_summary"]), f"{where}.pairs[{i}]")
                 rebuilt = belief_from_entries(prior, log.entries)
                 for name, stored, value in zip(("alpha", "beta"), (pair["alpha"], pair["beta"]), rebuilt):
                     if not math.isclose(float(stored), value, rel_tol=1e-9, abs_tol=1e-9):

@@ -57,6 +57,7 @@ class ProvenanceEntry:
         "corroborated_by",
         "n_folded",
         "alive",
+        "summary",
     )
 
     def __init__(
@@ -85,6 +86,8 @@ class ProvenanceEntry:
         self.n_folded = 1
         #: False once retracted or folded away
         self.alive = True
+        #: for a compacted bucket, what it folded (:class:`FoldSummary`); None otherwise, or unknown
+        self.summary: FoldSummary | None = None
 
     @property
     def counted(self) -> bool:
@@ -104,6 +107,87 @@ class ProvenanceEntry:
             f"d_beta={self.d_beta:.6g}, status={self.status.value}, node={self.node!r}, "
             f"predicate={self.predicate!r})"
         )
+
+
+class FoldSummary:
+    """What a compacted bucket folded, in bounded memory (at most one count per status):
+    how many original entries per status, the time of the first, and the first and last event
+    ids (in log order). The last time, the summed increments and the total are the bucket's own
+    ``t``, ``d_alpha``/``d_beta`` and ``n_folded``. Entries folded before summaries were kept
+    (files written by older versions) count under the status ``"unknown"``."""
+
+    __slots__ = ("counts", "t_first", "first_event_id", "last_event_id")
+
+    def __init__(
+        self,
+        counts: dict[str, int],
+        t_first: int | None,
+        first_event_id: str | None,
+        last_event_id: str | None,
+    ) -> None:
+        self.counts = counts
+        self.t_first = t_first
+        self.first_event_id = first_event_id
+        self.last_event_id = last_event_id
+
+    @classmethod
+    def unknown(cls, n: int) -> FoldSummary:
+        """The summary of ``n`` folded entries of which nothing was kept."""
+        return cls({UNKNOWN_STATUS: n}, None, None, None)
+
+    @classmethod
+    def committed(cls, n: int, t_first: int, first_event_id: str | None, last_event_id: str | None) -> FoldSummary:
+        """The summary of ``n`` committed entries (what the journalled fast paths fold)."""
+        return cls({EntryStatus.COMMITTED.value: n}, t_first, first_event_id, last_event_id)
+
+    @classmethod
+    def of_entries(cls, folded: Sequence[ProvenanceEntry]) -> FoldSummary:
+        """The summary of folding these entries (a bucket among them contributes its summary)."""
+        out = cls({}, None, None, None)
+        for e in folded:
+            if e.status is _COMPACTED:
+                out.absorb(e.summary if e.summary is not None else cls.unknown(e.n_folded))
+            else:
+                out.absorb(cls({e.status.value: 1}, e.t, e.event_id, e.event_id))
+        return out
+
+    def absorb(self, later: FoldSummary) -> None:
+        """Add the summary of entries folded after (or logged after) these ones."""
+        counts = self.counts
+        for status, n in later.counts.items():
+            counts[status] = counts.get(status, 0) + n
+        if later.t_first is not None and (self.t_first is None or later.t_first < self.t_first):
+            self.t_first = later.t_first
+        if self.first_event_id is None:
+            self.first_event_id = later.first_event_id
+        if later.last_event_id is not None:
+            self.last_event_id = later.last_event_id
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict."""
+        return {
+            "counts": dict(self.counts),
+            "t_first": self.t_first,
+            "first_event_id": self.first_event_id,
+            "last_event_id": self.last_event_id,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> FoldSummary:
+        counts = {str(k): int(v) for k, v in data["counts"].items()}
+        t_first = data.get("t_first")
+        return cls(counts, None if t_first is None else int(t_first), data.get("first_event_id"),
+                   data.get("last_event_id"))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, FoldSummary) and self.to_dict() == other.to_dict()
+
+    def __repr__(self) -> str:
+        return f"FoldSummary({self.to_dict()!r})"
+
+
+#: the status under which a summary counts folded entries whose statuses were not kept
+UNKNOWN_STATUS = "unknown"
 
 
 # ------------------------------------------------------------------ the equations
@@ -151,26 +235,66 @@ def fold_into_bucket(
     d_beta = math.fsum(e.d_beta for e in folded if e.status in COUNTED)
     n_folded = sum(e.n_folded for e in folded)
     t_max = max(e.t for e in folded)
-    return merge_into_bucket(bucket, node, predicate, t_max, d_alpha, d_beta, n_folded)
+    summary = FoldSummary.of_entries(folded)
+    return merge_into_bucket(bucket, node, predicate, t_max, d_alpha, d_beta, n_folded, summary)
 
 
 def merge_into_bucket(
-    bucket: ProvenanceEntry | None, node: Any, predicate: str, t_max: int, d_alpha: float, d_beta: float, n_folded: int
+    bucket: ProvenanceEntry | None,
+    node: Any,
+    predicate: str,
+    t_max: int,
+    d_alpha: float,
+    d_beta: float,
+    n_folded: int,
+    summary: FoldSummary | None = None,
 ) -> ProvenanceEntry:
     """Add one folded increment (already summed) to a pair's bucket, or make the bucket.
+    ``summary`` describes the folded entries (None: nothing known of them but their number).
 
     One IEEE addition of two floats is correctly rounded, so adding the sum to the bucket equals
     ``math.fsum`` of the two."""
+    if summary is None:
+        summary = FoldSummary.unknown(n_folded)
     if bucket is None:
         bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, _COMPACTED, node, predicate)
         bucket.n_folded = n_folded
+        bucket.summary = summary
         return bucket
+    if bucket.summary is None:
+        bucket.summary = FoldSummary.unknown(bucket.n_folded)
+    bucket.summary.absorb(summary)
     bucket.d_alpha += d_alpha
     bucket.d_beta += d_beta
     bucket.n_folded += n_folded
     if t_max > bucket.t:
         bucket.t = t_max
     return bucket
+
+
+def bucket_summary(entries: Iterable[ProvenanceEntry]) -> FoldSummary | None:
+    """The fold summary of a log's compacted bucket (None without a bucket or a summary)."""
+    for e in entries:
+        if e.status is _COMPACTED:
+            return e.summary
+    return None
+
+
+def attach_summary(entries: list[ProvenanceEntry], summary: FoldSummary, where: str) -> None:
+    """Give a loaded log's bucket its saved fold summary."""
+    for e in entries:
+        if e.status is _COMPACTED:
+            e.summary = summary
+            return
+    raise ValueError(f"{where}.fold_summary: the pair has no compacted entry to summarise")
+
+
+def merged_summary(head: ProvenanceEntry, extra: ProvenanceEntry) -> FoldSummary:
+    """The summary of two buckets merged into one (migration), ``head`` first."""
+    merged = FoldSummary({}, None, None, None)
+    for bucket, n in ((head, head.n_folded - extra.n_folded), (extra, extra.n_folded)):
+        merged.absorb(bucket.summary if bucket.summary is not None else FoldSummary.unknown(n))
+    return merged
 
 
 # ------------------------------------------------------------------ a pair's log
