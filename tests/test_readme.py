@@ -50,12 +50,12 @@ def test_readme_commands_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, ca
     """Each command runs on a small bench's data (the README's node id is swapped for one the small
     outdoor suite has when it lacks it)."""
     commands = _readme_commands()
-    assert [c[0] for c in commands] == ["replay", "show", "inspect"]
+    assert [c[0] for c in commands] == ["replay", "show", "explain"]
     monkeypatch.chdir(tmp_path)
     assert main(["bench", "--suite", "outdoor", "--scale", "0.05", "--out", "results/demo", "--quiet",
                  "--no-real", "--no-retrieval", "--operators", "comod"]) == 0
     for cmd in commands:
-        if cmd[0] == "inspect":
+        if cmd[0] == "explain":
             from sgbelief import SceneGraph
 
             graph = SceneGraph.load(cmd[1])
