@@ -214,6 +214,7 @@ def entry_state(entry: ProvenanceEntry) -> list[Any]:
     """Every field of an entry, floats bit for bit."""
     return float_bits([entry.event_id, entry.t, entry.d_alpha, entry.d_beta, entry.status.value, entry.stance,
                         entry.corroborated_by, entry.n_folded, entry.node, entry.predicate, entry.alive,
+                        None if entry.verdict is None else int(entry.verdict), entry.confidence,
                         None if entry.summary is None else entry.summary.to_dict()])
 
 

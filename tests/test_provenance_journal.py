@@ -16,24 +16,28 @@ from sgbelief import SceneGraph
 from sgbelief._fast.folds import fold_journal_records, retired_ids
 from sgbelief._fast.journal import JournalledProvenanceStore
 from sgbelief.errors import RetractionError
-from sgbelief.graph.provenance import EntryStatus, ProvenanceStore
+from sgbelief.graph.provenance import EntryStatus, EntryVerdict, ProvenanceStore
 from sgbelief.testing import apply_store_operations, check_store_matches_reference, provenance_signature
 
 _NODES = ["a", "b", "c"]
 _PREDS = ["is_p", "is_q"]
 _FLOAT = st.sampled_from([0.0, 0.25, 0.5, 1.0, 0.1, 1e-9, 3.0, -0.0])
+#: what an operator records of the event behind an entry (None: a baseline)
+_VERDICT = st.sampled_from([None, *EntryVerdict])
+_CONFIDENCE = st.sampled_from([None, 0.0, 0.3, 0.9, 1.0])
 _STATUS = st.sampled_from([EntryStatus.COMMITTED, EntryStatus.DISCARDED, EntryStatus.RELEASED,
                            EntryStatus.RESOLVED, EntryStatus.QUARANTINED, EntryStatus.REFUSED])
 
 # operations with a time step instead of a time: ("commit" / "record", ..., dt, ...)
 _commit = st.tuples(st.just("commit"), st.sampled_from(_NODES), st.sampled_from(_PREDS),
                     st.sampled_from(["x", "y", None, "new"]), st.integers(-1, 3), _FLOAT, _FLOAT,
-                    st.sampled_from([-1, 0, 1]))
+                    st.sampled_from([-1, 0, 1]), _VERDICT, _CONFIDENCE)
 _op = st.one_of(
     _commit,
     st.tuples(st.just("record"), st.sampled_from(_NODES), st.sampled_from(_PREDS), st.sampled_from(["x", "new"]),
               st.integers(0, 2), _FLOAT, _FLOAT,
-              st.sampled_from([EntryStatus.REFUSED, EntryStatus.QUARANTINED, EntryStatus.COMMITTED])),
+              st.sampled_from([EntryStatus.REFUSED, EntryStatus.QUARANTINED, EntryStatus.COMMITTED]),
+              _VERDICT, _CONFIDENCE),
     st.tuples(st.just("transition"), st.integers(0, 5), _STATUS, st.sampled_from([1.0, 0.5])),
     st.tuples(st.just("transition_held"), st.integers(0, 5), _STATUS, st.sampled_from([1.0, 0.5])),
     st.tuples(st.just("compact"), st.integers(-2, 4)),
@@ -46,7 +50,7 @@ _op = st.one_of(
 #: mostly commits in time order with unique ids, and compactions: the journal-folding paths
 _stream_commit = st.tuples(st.just("commit"), st.sampled_from(_NODES), st.sampled_from(_PREDS),
                            st.sampled_from(["new", "new", "new", "x"]), st.sampled_from([0, 0, 1, 1, 2]),
-                           _FLOAT, _FLOAT, st.sampled_from([-1, 0, 1]))
+                           _FLOAT, _FLOAT, st.sampled_from([-1, 0, 1]), _VERDICT, _CONFIDENCE)
 
 
 @st.composite
@@ -67,13 +71,14 @@ def _timed(ops: list[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
     for i, op in enumerate(ops):
         kind = op[0]
         if kind == "commit":
-            _, node, pred, eid, dt, da, db, stance = op
+            _, node, pred, eid, dt, da, db, stance, *known = op
             now += max(dt, 0)
-            out.append(("commit", node, pred, f"e{i}" if eid == "new" else eid, now + min(dt, 0), da, db, stance))
+            out.append(("commit", node, pred, f"e{i}" if eid == "new" else eid, now + min(dt, 0), da, db, stance,
+                        *known))
         elif kind == "record":
-            _, node, pred, eid, dt, da, db, status = op
+            _, node, pred, eid, dt, da, db, status, *known = op
             now += dt
-            out.append(("record", node, pred, f"e{i}" if eid == "new" else eid, now, da, db, status, 1))
+            out.append(("record", node, pred, f"e{i}" if eid == "new" else eid, now, da, db, status, 1, *known))
         elif kind == "compact":
             out.append(("compact", now - op[1]))
         else:

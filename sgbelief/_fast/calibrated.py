@@ -22,7 +22,7 @@ from sgbelief.fusion.compatibility import Verdict
 from sgbelief.fusion.conformal import ConformalSlice
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.rules import kl_upper_bound, revision_kl_exceeds
-from sgbelief.graph.provenance import EntryStatus
+from sgbelief.graph.provenance import EntryStatus, EntryVerdict
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.operators.calibrated import CalibratedOperator
@@ -38,6 +38,9 @@ _BELOW = Action.BELOW_THRESHOLD
 _A_COMMITTED = Action.COMMITTED
 _A_QUARANTINED = Action.QUARANTINED
 _A_REFUSED = Action.REFUSED
+# the verdict codes entries record (rules.ENTRY_VERDICT, without hashing an Enum per target)
+_E_NO_CLAIM, _E_CORR = EntryVerdict.NO_CLAIM, EntryVerdict.CORROBORATES
+_E_CONTRA, _E_GEO = EntryVerdict.CONTRADICTS, EntryVerdict.GEOMETRIC
 
 
 class FusedCalibratedEngine:
@@ -150,9 +153,11 @@ def apply_fused(
                     claims[key] = n_prev + 1
                 claim_pos = (lam > 1.0) if (cal_sign and lam != 1.0) else raw_pos
                 if y is None:
-                    verdict = _NO_CLAIM
+                    verdict, code = _NO_CLAIM, _E_NO_CLAIM
+                elif (y == 1) == claim_pos:
+                    verdict, code = _CORR, _E_CORR
                 else:
-                    verdict = _CORR if (y == 1) == claim_pos else _CONTRA
+                    verdict, code = _CONTRA, _E_CONTRA
                 if node not in gnx:
                     graph.ensure_node(node)
                 if log is None:
@@ -168,9 +173,9 @@ def apply_fused(
                         gw = w0 * mass
                         ga, gb = (gw, 0.0) if y == 1 else (0.0, gw)
                         if prov._timeline:
-                            record(node, pred, eid, t, ga, gb, _COMMITTED, 1 if y == 1 else -1)
+                            record(node, pred, eid, t, ga, gb, _COMMITTED, 1 if y == 1 else -1, _E_GEO, c)
                         else:
-                            commit(node, pred, eid, t, ga, gb, 1 if y == 1 else -1)
+                            commit(node, pred, eid, t, ga, gb, 1 if y == 1 else -1, _E_GEO, c)
                         a += ga
                         b += gb
                 w = w0 * kappa * mass
@@ -180,7 +185,7 @@ def apply_fused(
                     # Property 2: refused and logged, never committed; geometry's stance opposes the claim
                     stance = -1 if claim_pos else 1
                     had_pending = key in pending_map
-                    record(node, pred, eid, t, da, db, _REFUSED, stance)
+                    record(node, pred, eid, t, da, db, _REFUSED, stance, code, c)
                     if had_pending:  # otherwise the only pending entry is this refused one
                         resolutions += queues.quarantine_feedback(prov, node, pred, stance, eid, t)
                     e_refused += 1
@@ -199,7 +204,7 @@ def apply_fused(
                 else:
                     exceeds = revision_kl_exceeds(a, b, da, db, tau_rev)
                 if exceeds:
-                    record(node, pred, eid, t, da, db, _QUARANTINED, stance)
+                    record(node, pred, eid, t, da, db, _QUARANTINED, stance, code, c)
                     e_quarantined += 1
                     if report:
                         outcomes.append(TargetOutcome(node, mass, verdict, _A_QUARANTINED, 0.0, 0.0))
@@ -207,9 +212,9 @@ def apply_fused(
                     # committed entries go to the journal unless the timeline is live: then the next
                     # refusal or quarantine would materialise the journal anyway
                     if prov._timeline:
-                        record(node, pred, eid, t, da, db, _COMMITTED, stance)
+                        record(node, pred, eid, t, da, db, _COMMITTED, stance, code, c)
                     else:
-                        commit(node, pred, eid, t, da, db, stance)
+                        commit(node, pred, eid, t, da, db, stance, code, c)
                     e_committed += 1
                     if report:
                         outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))

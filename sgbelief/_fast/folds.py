@@ -30,6 +30,7 @@ import numpy as np
 from sgbelief.graph.provenance import (
     COUNTED,
     EntryStatus,
+    EntryVerdict,
     FoldSummary,
     PairKey,
     PairLog,
@@ -37,17 +38,24 @@ from sgbelief.graph.provenance import (
     merge_into_bucket,
     settled_before,
 )
+from sgbelief.graph.provenance_log import VERDICT_SYMBOLS, claim_lambda_hat, lambda_hat_sum
 
 #: a committed entry not yet materialised as a ProvenanceEntry:
-#: (pair key, event id, t, d_alpha, d_beta, stance, the pair's log). The log is the one the store
-#: holds for the key: whatever removes or replaces a pair's log materialises the journal first.
-JournalRecord = tuple[PairKey, str | None, int, float, float, int, PairLog | None]
+#: (pair key, event id, t, d_alpha, d_beta, stance, the pair's log, verdict, confidence). The log
+#: is the one the store holds for the key: whatever removes or replaces a pair's log materialises
+#: the journal first.
+JournalRecord = tuple[PairKey, str | None, int, float, float, int, PairLog | None, EntryVerdict | None, float | None]
 record_event_id = itemgetter(1)
 record_t = itemgetter(2)
 record_d_alpha = itemgetter(3)
 record_d_beta = itemgetter(4)
 record_log = itemgetter(6)
+record_verdict = itemgetter(7)
 _COMPACTED = EntryStatus.COMPACTED
+_GEOMETRIC = EntryVerdict.GEOMETRIC
+_SYMBOLS = list(VERDICT_SYMBOLS.values())  # by code
+#: verdict (None included) -> column of the per-pair verdict counts in fold_journal_records
+_VERDICT_COLUMN: dict[Any, int] = {None: 0, **{v: int(v) + 1 for v in EntryVerdict}}
 
 
 def last_seen_order(ids: Iterable[str | None]) -> list[str]:
@@ -99,13 +107,34 @@ def retired_ids(
     return gone
 
 
-def _records_summary(recs: Sequence[JournalRecord], n: int | None = None) -> FoldSummary:
-    """The fold summary of journal records (committed, in time order): ``recs`` holds them all,
-    or, with ``n`` given, only the first and the last of the ``n``. The first event id is the
-    first record's with an id, as :meth:`FoldSummary.of_entries` takes it."""
+def _records_summary(recs: Sequence[JournalRecord], n: int | None = None,
+                     verdicts: dict[str, int] | None = None) -> FoldSummary:
+    """The fold summary of journal records (committed, in time order) without their
+    Lambda-hat: ``recs`` holds them all, or, with ``n`` given, only the first and the last of
+    the ``n`` (then ``verdicts`` are their counts per verdict). The first event id is the first
+    record's with an id, as :meth:`FoldSummary.of_entries` takes it."""
     first = next((r[1] for r in recs if r[1] is not None), None)
     last = next((r[1] for r in reversed(recs) if r[1] is not None), None)
-    return FoldSummary.committed(len(recs) if n is None else n, recs[0][2], first, last)
+    return FoldSummary.committed(len(recs) if n is None else n, recs[0][2], first, last, verdicts)
+
+
+def _records_lambda_hats(recs: Sequence[JournalRecord], summary: FoldSummary) -> list[float]:
+    """Count the records' verdicts into ``summary`` and return the Lambda-hat of each claim
+    record (:func:`~sgbelief.graph.provenance_log.entry_lambda_hat` of the entry it stands for)."""
+    lams: list[float] = []
+    verdicts = summary.verdicts
+    for rec in recs:
+        v = rec[7]
+        if v is None:
+            continue
+        sym = _SYMBOLS[v]
+        verdicts[sym] = verdicts.get(sym, 0) + 1
+        if v != _GEOMETRIC:
+            lam = claim_lambda_hat(rec[3], rec[4])
+            if lam is not None:
+                lams.append(lam)
+    summary.n_lambda_hat = len(lams)
+    return lams
 
 
 def fold_with_journal(store: Any, before_t: int, n_old: int, raws: list[JournalRecord]) -> int:
@@ -196,9 +225,11 @@ def fold_with_journal(store: Any, before_t: int, n_old: int, raws: list[JournalR
                 n += len(recs)
             d_alpha = fsum(das)
             d_beta = fsum(dbs)
-        summary = FoldSummary.of_entries(fold)
         if recs:
-            summary.absorb(_records_summary(recs))
+            later = _records_summary(recs)
+            summary = FoldSummary.of_entries(fold, later, _records_lambda_hats(recs, later))
+        else:
+            summary = FoldSummary.of_entries(fold)
         bucket = merge_into_bucket(bucket, key[0], key[1], t_max, d_alpha, d_beta, n, summary)
         for entry in fold:
             entry.alive = False
@@ -246,6 +277,9 @@ def fold_journal_records(store: Any, raws: list[JournalRecord]) -> int | None:
             return None
     da = np.fromiter(map(record_d_alpha, raws), np.float64, m)
     db = np.fromiter(map(record_d_beta, raws), np.float64, m)
+    verdict_cols = list(map(_VERDICT_COLUMN.__getitem__, map(record_verdict, raws)))
+    # per pair (in glogs order): its records' verdict counts and Lambda-hat sum (none: baselines)
+    by_pair = None if verdict_cols.count(0) == m else _verdicts_by_pair(logs, glogs, verdict_cols, da, db)
     if k == m:  # one record per pair: each is its own group, in journal order
         order: Any = None
         n = np.ones(m, dtype=np.int64)
@@ -282,17 +316,19 @@ def fold_journal_records(store: Any, raws: list[JournalRecord]) -> int | None:
         return None
     # ---- nothing has changed so far
     tail = list(range(m)) if order is None else order[ends - 1].tolist()
-    for log, d_alpha, d_beta, c, t_max, i, j in zip(glogs, sa.tolist(), sb.tolist(), n.tolist(),
-                                                    t_last.tolist(), head, tail):
+    for g, (log, d_alpha, d_beta, c, t_max, i, j) in enumerate(zip(glogs, sa.tolist(), sb.tolist(), n.tolist(),
+                                                                   t_last.tolist(), head, tail)):
         entries = log.entries  # type: ignore[union-attr]
         key = raws[i][0]
+        verdicts = None if by_pair is None else by_pair[0][g]
         if order is None:
-            summary = _records_summary((raws[i],))
+            summary = _records_summary((raws[i],), 1, verdicts)
         elif raws[i][1] is None or raws[j][1] is None:  # rare: scan the pair's records for ids
-            g = slot[log]  # type: ignore[index]
-            summary = _records_summary([raws[r] for r in order[starts[g]:ends[g]].tolist()])
+            summary = _records_summary([raws[r] for r in order[starts[g]:ends[g]].tolist()], c, verdicts)
         else:
-            summary = _records_summary((raws[i], raws[j]), c)
+            summary = _records_summary((raws[i], raws[j]), c, verdicts)
+        if by_pair is not None:
+            summary.lambda_hat_sum, summary.n_lambda_hat = by_pair[1][g], by_pair[2][g]
         bucket = merge_into_bucket(entries[0] if entries else None, key[0], key[1], t_max, d_alpha, d_beta, c,
                                    summary)
         if not entries:
@@ -304,6 +340,29 @@ def fold_journal_records(store: Any, raws: list[JournalRecord]) -> int | None:
     if gone:
         store._compacted_order.extend(gone)
     return m
+
+
+def _verdicts_by_pair(logs: list[Any], glogs: list[Any], verdict_cols: list[int], da: np.ndarray, db: np.ndarray
+                      ) -> tuple[list[dict[str, int]], list[float], list[int]]:
+    """Per pair (``glogs`` order; ``logs``: each record's pair): its records' counts per verdict,
+    the exactly rounded sum of their claims' Lambda-hat (:func:`lambda_hat_sum`, record order)
+    and how many claims have one, as :meth:`FoldSummary.of_entries` gives them for the entries."""
+    m, k = len(logs), len(glogs)
+    slot = dict(zip(glogs, range(k)))
+    group = np.fromiter(map(slot.__getitem__, logs), np.intp, m)
+    cols = np.asarray(verdict_cols, dtype=np.intp)  # 0: None, code + 1 otherwise
+    table = np.bincount(group * 5 + cols, minlength=5 * k).reshape(k, 5)[:, 1:].tolist()
+    verdicts = [{_SYMBOLS[c]: n for c, n in enumerate(row) if n} for row in table]
+    finite = np.isfinite(da) & np.isfinite(db)
+    claim = (cols >= 1) & (cols <= 3) & (db > 0.0) & (da >= 0.0) & finite  # claim_lambda_hat is not None
+    idx = np.flatnonzero(claim)
+    n_lam = np.bincount(group[idx], minlength=k)
+    order = idx[np.argsort(group[idx], kind="stable")]  # claims by pair, record order within
+    lams = (da[order] / db[order]).tolist()
+    bounds = np.zeros(k + 1, dtype=np.intp)
+    np.cumsum(n_lam, out=bounds[1:])
+    sums = [lambda_hat_sum(lams[a:b]) if b > a else 0.0 for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist())]
+    return verdicts, sums, n_lam.tolist()
 
 
 __all__ = ["JournalRecord", "fold_journal_records", "fold_with_journal", "old_prefix_length", "retired_ids"]

@@ -39,6 +39,7 @@ from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA
 from sgbelief.graph.provenance import (
     COUNTED,
     EntryStatus,
+    EntryVerdict,
     PairKey,
     PairLog,
     ProvenanceEntry,
@@ -48,7 +49,7 @@ from sgbelief.graph.provenance import (
 
 #: the journal's first record while a loader's entries are deferred (see defer_entries): every
 #: reader that materialises a non-empty journal then builds them first
-DEFERRED: JournalRecord = ((None, ""), None, -1, 0.0, 0.0, 0, None)
+DEFERRED: JournalRecord = ((None, ""), None, -1, 0.0, 0.0, 0, None, None, None)
 _COMMITTED = EntryStatus.COMMITTED
 
 
@@ -88,7 +89,8 @@ class JournalledProvenanceStore(ProvenanceStore):
 
     # ------------------------------------------------------------ the journal
     def commit(
-        self, node: Any, predicate: str, event_id: str | None, t: int, d_alpha: float, d_beta: float, stance: int = 0
+        self, node: Any, predicate: str, event_id: str | None, t: int, d_alpha: float, d_beta: float, stance: int = 0,
+        verdict: EntryVerdict | None = None, confidence: float | None = None,
     ) -> None:
         """Record a committed increment: the belief changes at once (Eq. 3); the entry is
         journaled and materialised only when something reads the log, or folded straight into
@@ -99,7 +101,7 @@ class JournalledProvenanceStore(ProvenanceStore):
             log = self._pairs[key] = PairLog(self.prior_alpha, self.prior_beta)
         log.alpha += d_alpha
         log.beta += d_beta
-        self._journal.append((key, event_id, t, d_alpha, d_beta, stance, log))
+        self._journal.append((key, event_id, t, d_alpha, d_beta, stance, log, verdict, confidence))
 
     def materialize(self) -> None:
         """Turn the journal into entries (logs, event index, timeline), exactly as ``record`` would
@@ -119,8 +121,8 @@ class JournalledProvenanceStore(ProvenanceStore):
         by_event = self._by_event
         tl_append = self._timeline.append
         committed = _COMMITTED
-        for key, eid, t, da, db, stance, log in journal:
-            entry = ProvenanceEntry(eid, t, da, db, committed, key[0], key[1], stance)
+        for key, eid, t, da, db, stance, log, verdict, confidence in journal:
+            entry = ProvenanceEntry(eid, t, da, db, committed, key[0], key[1], stance, verdict, confidence)
             log.entries.append(entry)  # type: ignore[union-attr]
             if eid is not None:
                 index_event(by_event, eid, entry)
@@ -197,10 +199,13 @@ class JournalledProvenanceStore(ProvenanceStore):
         d_beta: float,
         status: EntryStatus = _COMMITTED,
         stance: int = 0,
+        verdict: EntryVerdict | None = None,
+        confidence: float | None = None,
     ) -> ProvenanceEntry:
         if self._journal:  # keep arrival order: journal records come first
             self.materialize()
-        return ProvenanceStore.record(self, node, predicate, event_id, t, d_alpha, d_beta, status, stance)
+        return ProvenanceStore.record(self, node, predicate, event_id, t, d_alpha, d_beta, status, stance, verdict,
+                                      confidence)
 
     def transition(self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0) -> None:
         if self._journal and entry.status in COUNTED and status not in COUNTED:

@@ -31,7 +31,8 @@ def provenance_signature(graph: SceneGraph) -> dict[str, Any]:
 
     def entry(e: ProvenanceEntry) -> Any:
         return float_bits([e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by,
-                      e.n_folded, e.node, e.predicate, e.alive])
+                      e.n_folded, e.node, e.predicate, e.alive, None if e.verdict is None else int(e.verdict),
+                      e.confidence, None if e.summary is None else e.summary.to_dict()])
 
     return {
         "nodes": [(n, dict(a)) for n, a in graph.nx.nodes(data=True)],

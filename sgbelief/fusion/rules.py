@@ -12,6 +12,7 @@ support stratum             :func:`support_stratum`
 calibrated LR (Eq. 2)       :func:`calibrated_log_lr` (used by the calibration slices)
 weight w = w0 kappa T(v)    :func:`evidence_weight`
 increments (Eq. 4)          :func:`claim_increments`
+Eq. 4 inverted (Λ̂, w)      :func:`claim_lambda_hat`, :func:`claim_weight`
 geometric observation       :func:`verification_increments`
 revision test (KL > tau)    :func:`revision_kl_exceeds` (bound: :func:`kl_upper_bound`)
 ==========================  ==========================================================
@@ -24,6 +25,9 @@ import math
 from scipy import special as _sp
 
 from sgbelief.fusion.compatibility import Verdict
+# Eq. 4 inverted: defined with the provenance log, which reads its entries' Lambda-hat back (the
+# model layer cannot import this one); exported here, next to the equation they invert
+from sgbelief.graph.provenance_log import EntryVerdict, claim_lambda_hat, claim_weight
 
 __all__ = [
     "claim_asserts",
@@ -33,10 +37,13 @@ __all__ = [
     "calibrated_log_lr",
     "evidence_weight",
     "claim_increments",
+    "claim_lambda_hat",
+    "claim_weight",
     "verification_increments",
     "kl_upper_bound",
     "revision_kl_exceeds",
     "stance_of",
+    "ENTRY_VERDICT",
 ]
 
 _betaln = _sp.betaln
@@ -72,6 +79,15 @@ def verdict(outcome: int | None, asserts: bool) -> Verdict:
     if outcome is None:
         return Verdict.NO_CLAIM
     return Verdict.CORROBORATES if (outcome == 1) == asserts else Verdict.CONTRADICTS
+
+
+#: the verdict code a provenance entry records for each verdict (a geometric observation records
+#: ``EntryVerdict.GEOMETRIC``)
+ENTRY_VERDICT: dict[Verdict, EntryVerdict] = {
+    Verdict.CORROBORATES: EntryVerdict.CORROBORATES,
+    Verdict.CONTRADICTS: EntryVerdict.CONTRADICTS,
+    Verdict.NO_CLAIM: EntryVerdict.NO_CLAIM,
+}
 
 
 def support_stratum(n_prior_claims: int, n_strata: int) -> int:
@@ -122,6 +138,9 @@ def claim_increments(lam: float, weight: float) -> tuple[float, float]:
 
     ``weight`` is w T(v) (:func:`evidence_weight`). Under a Beta(1, 1) belief and weight 1 this is
     the exact Bayesian update of y by one observation of likelihood ratio Lambda.
+
+    The equation inverts: Lambda = d_alpha / d_beta (:func:`claim_lambda_hat`) and
+    w T(v) = d_alpha + d_beta (:func:`claim_weight`), so a log entry need not store either.
     """
     return weight * lam / (1.0 + lam), weight / (1.0 + lam)
 

@@ -17,6 +17,7 @@ the checked columns; a store that builds its entries later starts from the same 
 from __future__ import annotations
 
 import json
+import math
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from itertools import chain, repeat
@@ -39,14 +40,18 @@ from sgbelief.graph.provenance import (
     COUNTED,
     PENDING,
     EntryStatus,
+    EntryVerdict,
     FoldSummary,
     PairLog,
     ProvenanceEntry,
     ProvenanceStore,
 )
+from sgbelief.graph.provenance_log import VERDICT_BY_CODE
 
 #: the store's entries: every status, in the order of their codes in a file written now
 STATUSES = list(EntryStatus)
+#: an entry's verdict -> its code in ``entry_verdict`` (-1: not recorded)
+_VERDICT_CODE: dict[Any, int] = {None: -1, **{v: int(v) for v in EntryVerdict}}
 
 
 # ======================================================================== saving
@@ -94,6 +99,8 @@ def provenance_arrays(
     status_c: list[Any] = []
     eid_c: list[Any] = []
     corr_c: list[Any] = []
+    verdict_c: list[Any] = []
+    conf_c: list[Any] = []
     get = attrgetter("t"), attrgetter("stance"), attrgetter("n_folded"), attrgetter("d_alpha"), attrgetter("d_beta")
     for a in range(0, m, CHUNK):
         chunk = flat[a:a + CHUNK]
@@ -110,7 +117,10 @@ def provenance_arrays(
         status_c += map(attrgetter("status"), chunk)
         eid_c += map(attrgetter("event_id"), chunk)
         corr_c += map(attrgetter("corroborated_by"), chunk)
+        verdict_c += map(attrgetter("verdict"), chunk)
+        conf_c += map(attrgetter("confidence"), chunk)
     arrays["entry_t"], arrays["entry_stance"], arrays["entry_n_folded"] = t_arr, stance, n_folded
+    arrays.update(_verdict_arrays(verdict_c, conf_c, pair_of))
     arrays["entry_d_alpha"], arrays["entry_d_beta"] = da, db
     bad = ~(np.isfinite(da) & np.isfinite(db))
     if bad.any():
@@ -165,7 +175,30 @@ def provenance_arrays(
     return arrays, header
 
 
-def _is_status(value: Any, codes: dict[EntryStatus, int]) -> bool:
+def _verdict_arrays(verdicts: list[Any], confidences: list[Any], pair_of: Callable[[int], Any]
+                    ) -> dict[str, np.ndarray]:
+    """The optional ``entry_verdict`` (code, -1 = not recorded) and ``entry_confidence`` (NaN = not
+    recorded) columns; none when no entry recorded either (files of the baselines stay as they were)."""
+    m = len(verdicts)
+    if verdicts.count(None) == m and confidences.count(None) == m:
+        return {}
+    try:
+        code = np.fromiter(map(_VERDICT_CODE.__getitem__, verdicts), I1, m)
+    except (KeyError, TypeError):
+        i = next(i for i, v in enumerate(verdicts) if not _is_status(v, _VERDICT_CODE))
+        raise ValueError(f"provenance entry of {pair_of(i)!r}: verdict {verdicts[i]!r} is not an EntryVerdict") from None
+    try:
+        conf = np.fromiter((math.nan if c is None else c for c in confidences), F8, m)
+    except (TypeError, ValueError):
+        raise ValueError("provenance entry confidence must be None or a number") from None
+    bad = ~(np.isnan(conf) | ((conf >= 0.0) & (conf <= 1.0)))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"provenance entry of {pair_of(i)!r}: confidence {confidences[i]!r} is not in [0, 1]")
+    return {"entry_verdict": code, "entry_confidence": conf}
+
+
+def _is_status(value: Any, codes: dict[Any, int]) -> bool:
     try:
         return value in codes
     except TypeError:  # unhashable
@@ -238,6 +271,9 @@ class ProvenanceColumns:
         self.compacted_ids = compacted_ids
         #: entry index -> the saved fold summary (a dict) of that compacted bucket
         self.fold_summaries: dict[int, dict[str, Any]] = {}
+        #: the optional per-entry verdict codes (-1: not recorded) and confidences (NaN: not recorded)
+        self.verdict: np.ndarray | None = None
+        self.confidence: np.ndarray | None = None
 
     @property
     def n_entries(self) -> int:
@@ -266,9 +302,14 @@ class ProvenanceColumns:
         pick = (lambda a: a) if rows is None else (lambda a: a[rows])  # noqa: E731
         pair_of = np.repeat(np.arange(len(self.lengths)), self.lengths)
         pairs = pick(pair_of)
+        extras: list[Iterable[Any]] = []
+        if self.verdict is not None and self.confidence is not None:
+            extras = [_VERDICT_OBJECTS[pick(self.verdict).astype(np.intp) + 1].tolist(),
+                      _confidences(pick(self.confidence))]
         entries = list(map(ProvenanceEntry, pick(self.eid_array()).tolist(), pylist(pick(self.t)),
                            pylist(pick(self.da)), pylist(pick(self.db)), self.status_arr[pick(self.status)].tolist(),
-                           self.pair_nodes[pairs].tolist(), self.pair_preds[pairs].tolist(), pick(self.stance).tolist()))
+                           self.pair_nodes[pairs].tolist(), self.pair_preds[pairs].tolist(), pick(self.stance).tolist(),
+                           *extras))
         n_folded = pick(self.n_folded)
         folded = np.flatnonzero(n_folded != 1)
         at = entries.__getitem__
@@ -388,7 +429,43 @@ def read_provenance(arch: NpzArchive, h: ProvenanceHeader, node_ids: list[Any]) 
                              status, stance, n_folded, null, eids, corr_entry, corr_len, corr_ids, timeline,
                              queues["quarantine"], queues["disagreement"], compacted)
     cols.fold_summaries = _read_fold_summaries(arch, m, status, statuses)
+    cols.verdict, cols.confidence = _read_verdicts(arch, m)
     return cols
+
+
+def _read_verdicts(arch: NpzArchive, m: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The optional ``entry_verdict`` / ``entry_confidence`` columns (absent in older files and
+    in maps of operators without verdicts: every entry's are None)."""
+    has_v, has_c = arch.has("entry_verdict"), arch.has("entry_confidence")
+    if not (has_v or has_c):
+        return None, None
+    if has_v != has_c:
+        raise arch.error("arrays 'entry_verdict' and 'entry_confidence' come together")
+    verdict = arch.read("entry_verdict", I1, (m,))
+    if m and (int(verdict.min()) < -1 or int(verdict.max()) >= len(VERDICT_BY_CODE)):
+        bad = int(np.flatnonzero((verdict < -1) | (verdict >= len(VERDICT_BY_CODE)))[0])
+        raise arch.error(f"array 'entry_verdict': code {int(verdict[bad])} at entry {bad} out of range "
+                         f"[-1, {len(VERDICT_BY_CODE)})")
+    confidence = arch.read("entry_confidence", F8, (m,))
+    bad = ~(np.isnan(confidence) | ((confidence >= 0.0) & (confidence <= 1.0)))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise arch.error(f"array 'entry_confidence': {float(confidence[i])!r} at entry {i} is not in [0, 1] (NaN: "
+                         "not recorded)")
+    return verdict, confidence
+
+
+#: verdict code + 1 -> the entry's verdict (code -1: None)
+_VERDICT_OBJECTS = np.array([None, *VERDICT_BY_CODE], dtype=object)
+
+
+def _confidences(conf: np.ndarray) -> list[float | None]:
+    """Confidences as Python values, NaN (not recorded) as None."""
+    values = pylist(conf)
+    missing = np.flatnonzero(np.isnan(conf))
+    for i in missing.tolist():
+        values[i] = None
+    return values
 
 
 def _read_fold_summaries(arch: NpzArchive, m: int, status: np.ndarray, statuses: list[EntryStatus]

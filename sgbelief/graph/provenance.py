@@ -41,12 +41,15 @@ from sgbelief.graph.provenance_log import (
     COUNTED,
     PENDING,
     EntryStatus,
+    EntryVerdict,
     FoldSummary,
     PairLog,
     ProvenanceEntry,
     attach_summary,
     belief_from_entries,
     bucket_summary,
+    entry_extras,
+    entry_row,
     event_list,
     fold_into_bucket,
     index_event,
@@ -63,6 +66,7 @@ __all__ = [
     "COUNTED",
     "PENDING",
     "EntryStatus",
+    "EntryVerdict",
     "FoldSummary",
     "Node",
     "PairKey",
@@ -248,13 +252,17 @@ class ProvenanceStore:
         d_beta: float,
         status: EntryStatus = EntryStatus.COMMITTED,
         stance: int = 0,
+        verdict: EntryVerdict | None = None,
+        confidence: float | None = None,
     ) -> ProvenanceEntry:
-        """Append an entry; counted statuses update the belief, pending ones join their queue."""
+        """Append an entry; counted statuses update the belief, pending ones join their queue.
+        ``verdict`` and ``confidence``: what the operator knew when it wrote the entry (None:
+        nothing, e.g. a baseline)."""
         key = (node, predicate)
         log = self._pairs.get(key)
         if log is None:
             log = self._pairs[key] = PairLog(self.prior_alpha, self.prior_beta)
-        entry = ProvenanceEntry(event_id, t, d_alpha, d_beta, status, node, predicate, stance)
+        entry = ProvenanceEntry(event_id, t, d_alpha, d_beta, status, node, predicate, stance, verdict, confidence)
         log.entries.append(entry)
         if status in COUNTED:
             log.alpha += d_alpha
@@ -267,11 +275,12 @@ class ProvenanceStore:
         return entry
 
     def commit(
-        self, node: Any, predicate: str, event_id: str | None, t: int, d_alpha: float, d_beta: float, stance: int = 0
+        self, node: Any, predicate: str, event_id: str | None, t: int, d_alpha: float, d_beta: float, stance: int = 0,
+        verdict: EntryVerdict | None = None, confidence: float | None = None,
     ) -> None:
-        """Record a committed increment (Eq. 3): ``record(..., COMMITTED, stance)`` without
-        returning the entry (so a store is free to build the entry later)."""
-        self.record(node, predicate, event_id, t, d_alpha, d_beta, _COMMITTED, stance)
+        """Record a committed increment (Eq. 3): ``record(..., COMMITTED, stance, verdict,
+        confidence)`` without returning the entry (so a store is free to build the entry later)."""
+        self.record(node, predicate, event_id, t, d_alpha, d_beta, _COMMITTED, stance, verdict, confidence)
 
     def transition(self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0) -> None:
         """Move an entry to a new status; ``scale`` multiplies its increments (w/k on timeout).
@@ -498,10 +507,7 @@ class ProvenanceStore:
                 "predicate": predicate,
                 "alpha": log.alpha,
                 "beta": log.beta,
-                "entries": [
-                    [e.event_id, e.t, e.d_alpha, e.d_beta, e.status.value, e.stance, e.corroborated_by, e.n_folded]
-                    for e in log.entries
-                ],
+                "entries": list(map(entry_row, log.entries)),
             }
             summary = bucket_summary(log.entries)
             if summary is not None:
@@ -527,13 +533,15 @@ class ProvenanceStore:
                     raise FormatError(f"{where}.pairs[{i}].predicate must be a non-empty string")
                 log = logs.setdefault((node, predicate), PairLog(*prior))
                 for j, raw in enumerate(pair["entries"]):
-                    eid, t, da, db, status, stance, corr, n_folded = raw
+                    eid, t, da, db, status, stance, corr, n_folded = raw[:8]
                     st = _STATUS_BY_VALUE.get(status)
                     if st is None:
                         raise FormatError(f"{where}.pairs[{i}].entries[{j}]: unknown status {status!r}")
                     if not (math.isfinite(da) and math.isfinite(db)):
                         raise FormatError(f"{where}.pairs[{i}].entries[{j}]: increments must be finite")
-                    e = ProvenanceEntry(eid, int(t), float(da), float(db), st, node, predicate, int(stance))
+                    verdict, confidence = entry_extras(raw, f"{where}.pairs[{i}].entries[{j}]")
+                    e = ProvenanceEntry(eid, int(t), float(da), float(db), st, node, predicate, int(stance),
+                                        verdict, confidence)
                     e.corroborated_by = list(corr) if corr else None
                     e.n_folded = int(n_folded)
                     log.entries.append(e)

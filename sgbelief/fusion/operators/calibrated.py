@@ -20,6 +20,7 @@ from sgbelief.fusion.conformal import ConformalSlice, PredictionSet, no_coverage
 from sgbelief.fusion.operators.base import BaseOperator, OperatorEngine
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_exceeds: re-exported)
+    ENTRY_VERDICT,
     claim_asserts,
     claim_increments,
     evidence_weight,
@@ -31,7 +32,7 @@ from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_
     verdict,
     verification_increments,
 )
-from sgbelief.graph.provenance import EntryStatus
+from sgbelief.graph.provenance import EntryStatus, EntryVerdict
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
@@ -158,6 +159,7 @@ class CalibratedOperator(BaseOperator):
         lam, kappa = self.calibrator_.likelihood_ratio(event.confidence, context, pred)  # Eq. 2
         asserts = claim_asserts(event.confidence, lam if cfg.verdict_sign == "calibrated" else None)
         v = verdict(y, asserts)
+        code, c = ENTRY_VERDICT[v], event.confidence  # what each entry records of the event
         a, b = prov.alpha_beta(node, pred)
         resolutions: list[QueueResolution] = []
         if y is not None:
@@ -165,12 +167,13 @@ class CalibratedOperator(BaseOperator):
             self._pair_slice(pred).add_outcome(a / (a + b), y, cfg.calibration.min_refit, cfg.calibration.refit_growth)
             if self.observes_geometry:
                 ga, gb = verification_increments(y, cfg.w0 * mass)
-                prov.record(node, pred, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1 if y == 1 else -1)
+                prov.record(node, pred, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1 if y == 1 else -1,
+                            EntryVerdict.GEOMETRIC, c)
                 a, b = a + ga, b + gb
         da, db = claim_increments(lam, evidence_weight(cfg.w0, kappa, mass))  # Eq. 4
         if self.check_compatibility and v is _CONTRA:  # refusal (Property 2)
             stance = -1 if asserts else 1  # geometry's stance opposes the claim
-            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.REFUSED, stance)
+            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.REFUSED, stance, code, c)
             resolutions += queues.quarantine_feedback(prov, node, pred, stance, event.id, event.t)
             return Action.REFUSED, v, 0.0, 0.0, resolutions
         stance = stance_of(lam)
@@ -179,10 +182,10 @@ class CalibratedOperator(BaseOperator):
             resolutions += fb
             a, b = prov.alpha_beta(node, pred)
         if revision_kl_exceeds(a, b, da, db, cfg.tau_rev):  # revision: quarantine in Q
-            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.QUARANTINED, stance)
+            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.QUARANTINED, stance, code, c)
             action, da, db = Action.QUARANTINED, 0.0, 0.0
         else:
-            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.COMMITTED, stance)
+            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.COMMITTED, stance, code, c)
             action = Action.COMMITTED
         if self.check_compatibility and v is _CORR:  # later agreement resolves pending ⊥ at (v, phi)
             resolutions += queues.resolve_disagreements(prov, node, pred, event.t)
