@@ -16,6 +16,7 @@ from sgbelief.cli import main
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.graph.provenance_log import UNKNOWN_STATUS, EntryStatus
+from sgbelief.graph.story import NOT_RECORDED_OLD
 from sgbelief.testing import conformance_table, random_stream
 
 TABLE = conformance_table()
@@ -103,8 +104,10 @@ def test_refused_entries_are_bottom_and_not_counted() -> None:
     story = graph.explain("a", "is_car")
     refused, committed = story.events
     assert refused.verdict == "⊥" and not refused.counted and refused.stance == "denies"
-    assert committed.verdict is None and committed.counted
+    assert refused.lambda_hat == 0.0 and refused.weight == 2.0 and not refused.recorded  # a refusal is a claim
+    assert committed.verdict is None and committed.counted and committed.lambda_hat is None
     assert story.verdicts == {"⊥": 1} and "still pending" in story.sentence
+    assert story.not_recorded.endswith(NOT_RECORDED_OLD)  # entries without verdict or confidence
 
 
 def test_cli_prints_the_story_and_the_sentence(tmp_path, capsys) -> None:
@@ -117,7 +120,7 @@ def test_cli_prints_the_story_and_the_sentence(tmp_path, capsys) -> None:
     assert f"{key[0]!r} {key[1]}: Beta(" in out and story.sentence in out
     if story.folded is not None:
         assert "compacted (t=" in out and f"first {story.folded.first_event_id}" in out
-    assert "not its verdict, confidence, calibrated Λ̂ or weight" in out
+    assert "read back from each claim's increments" in out and "c: the event's confidence" in out
     # --json: the same data, every predicate of the node when none is given
     assert main(["explain", str(tmp_path / "map"), str(key[0]), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)

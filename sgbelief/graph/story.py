@@ -2,15 +2,19 @@
 happened to it, and why the pair is or is not committed (P > tau, strictly).
 
 The story is read from the provenance log alone (§4.3), so it is the same for a map in memory
-and for one loaded from graph.json or graph.npz. Compaction (T_prov) folds old entries into one
-``compacted`` bucket; its :class:`~sgbelief.graph.provenance_log.FoldSummary` keeps how many
-entries of each status it folded, the time range and the first and last event ids, so the
-counts of a story do not depend on compaction.
+and for one loaded from graph.json or graph.npz. Each entry written by a calibrated operator
+records its verdict (⊤ / ⊥ / ∅, or "geometric" for the geometric label observed as evidence)
+and the event's raw confidence; a claim's calibrated Lambda-hat and weight are read back from its
+increments (Eq. 4 inverted: :func:`~sgbelief.graph.provenance_log.claim_lambda_hat`,
+:func:`~sgbelief.graph.provenance_log.claim_weight`). Compaction (T_prov) folds old entries into
+one ``compacted`` bucket; its :class:`~sgbelief.graph.provenance_log.FoldSummary` keeps how
+many entries of each status and verdict it folded, the sum of their Lambda-hat, the time range
+and the first and last event ids, so the counts of a story do not depend on compaction.
 
-What an entry does not hold is said, not guessed: the log keeps the increments (d_alpha, d_beta)
-and the stance of the evidence, not the verdict, confidence, calibrated Lambda-hat or weight that
-produced them. Only the verdict of an entry of the disagreement queue is known from its status
-(refused, resolved, expired, dismissed: it arrived as ⊥).
+What the log does not hold is said, not guessed (:data:`NOT_RECORDED`). Entries of the
+baselines (no verdict) and of files written before verdicts were kept carry neither verdict nor
+confidence; of those, only an entry of the disagreement queue has a known verdict, from its
+status (refused, resolved, expired, dismissed: it arrived as ⊥).
 """
 
 from __future__ import annotations
@@ -18,10 +22,19 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from sgbelief.graph.provenance_log import COUNTED, UNKNOWN_STATUS, EntryStatus, ProvenanceEntry
+from sgbelief.graph.provenance_log import (
+    COUNTED,
+    UNKNOWN_STATUS,
+    VERDICT_SYMBOLS,
+    EntryStatus,
+    EntryVerdict,
+    ProvenanceEntry,
+    claim_lambda_hat,
+    claim_weight,
+)
 from sgbelief.graph.scene_graph import SceneGraph
 
-__all__ = ["NOT_RECORDED", "FoldedStory", "StoryEvent", "BeliefStory", "explain"]
+__all__ = ["NOT_RECORDED", "NOT_RECORDED_OLD", "FoldedStory", "StoryEvent", "BeliefStory", "explain"]
 
 #: statuses of an entry that arrived with a ⊥ verdict (it went through the disagreement queue Q⊥)
 REFUSAL_STATUSES = frozenset(
@@ -29,10 +42,21 @@ REFUSAL_STATUSES = frozenset(
 )
 #: what the provenance log does not keep (said once in every story)
 NOT_RECORDED = (
-    "the log keeps each event's increments and stance, not its verdict, confidence, calibrated "
-    "Λ̂ or weight (only ⊥ is known, from a refusal status); retracted events leave no entry"
+    "Λ̂ = dα/dβ and the weight w·T(v) = dα + dβ are read back from each claim's increments (Eq. 4 "
+    "inverted), not stored; not kept: how the weight splits into w0·κ̂·T(v), the event's other "
+    "targets, and retracted events (they leave no entry); a compacted bucket keeps only its counts "
+    "per status and verdict, time range, sums and mean Λ̂"
+)
+#: added when some entry carries no verdict or confidence
+NOT_RECORDED_OLD = (
+    "entries written by an operator without verdicts (the baselines) or by an older sgbelief carry "
+    "no verdict or confidence (·; ⊥ is known from a refusal status)"
 )
 _STANCE = {1: "supports", -1: "denies", 0: "neutral"}
+_BOTTOM = VERDICT_SYMBOLS[EntryVerdict.CONTRADICTS]
+_GEOMETRIC = VERDICT_SYMBOLS[EntryVerdict.GEOMETRIC]
+#: the verdicts of a claim (every verdict but the geometric observation)
+CLAIM_VERDICTS = tuple(sym for v, sym in VERDICT_SYMBOLS.items() if v.is_claim)
 
 
 @dataclass(frozen=True)
@@ -46,14 +70,22 @@ class StoryEvent:
     d_beta: float
     counted: bool  #: whether its increments are in the belief (Eq. 4)
     stance: str  #: supports / denies / neutral
-    verdict: str | None  #: "⊥" for an entry of the disagreement queue; None: not recorded
+    #: ⊤ / ⊥ / ∅ / "geometric" as recorded; "⊥" for an unrecorded entry of the disagreement
+    #: queue; None: not recorded
+    verdict: str | None
+    confidence: float | None = None  #: the event's raw confidence c (None: not recorded)
+    lambda_hat: float | None = None  #: a claim's calibrated Lambda-hat, dα/dβ (None: not a claim, or unknown)
+    weight: float | None = None  #: w·T(v) = dα + dβ (at w/k once released); None: unknown
     corroborated_by: tuple[str, ...] = ()
+    recorded: bool = False  #: whether the verdict and confidence were recorded with the entry
 
 
 @dataclass(frozen=True)
 class FoldedStory:
     """What compaction folded into the pair's bucket. ``counts`` holds ``"unknown"`` for entries
-    folded by a version that kept no summary; then ``t_first`` and the ids may be None."""
+    folded by a version that kept no summary; then ``t_first`` and the ids may be None.
+    ``verdicts`` counts the folded entries per recorded verdict; ``mean_lambda_hat`` is the mean
+    Lambda-hat of the ``n_lambda_hat`` folded claims that had one."""
 
     n: int
     counts: dict[str, int]
@@ -63,6 +95,9 @@ class FoldedStory:
     d_beta: float
     first_event_id: str | None
     last_event_id: str | None
+    verdicts: dict[str, int]
+    n_lambda_hat: int
+    mean_lambda_hat: float | None
 
 
 @dataclass(frozen=True)
@@ -79,7 +114,11 @@ class BeliefStory:
     folded: FoldedStory | None
     events: tuple[StoryEvent, ...]
     counts: dict[str, int]  #: entries per status, folded and live together
-    verdicts: dict[str, int]  #: entries per known verdict ("⊥"); the rest are not recorded
+    #: entries per verdict (⊤ / ⊥ / ∅ / geometric), folded and live together; entries without a
+    #: recorded verdict count only as ⊥ when their status says so
+    verdicts: dict[str, int]
+    n_claims: int  #: claim entries with a known Lambda-hat, folded and live
+    mean_lambda_hat: float | None  #: their mean Lambda-hat (None without any)
     sentence: str
     not_recorded: str = NOT_RECORDED
 
@@ -96,17 +135,30 @@ class BeliefStory:
 
 
 def _event(entry: ProvenanceEntry) -> StoryEvent:
-    status = entry.status
+    status, v = entry.status, entry.verdict
+    da, db = entry.d_alpha, entry.d_beta
+    if v is not None:
+        symbol = VERDICT_SYMBOLS[v]
+        lam = claim_lambda_hat(da, db) if v != EntryVerdict.GEOMETRIC else None
+        weight: float | None = claim_weight(da, db)
+    elif status in REFUSAL_STATUSES:  # a refused claim: its increments are a claim's (Eq. 4)
+        symbol, lam, weight = _BOTTOM, claim_lambda_hat(da, db), claim_weight(da, db)
+    else:
+        symbol, lam, weight = None, None, None
     return StoryEvent(
         event_id=entry.event_id,
         t=entry.t,
         status=status.value,
-        d_alpha=entry.d_alpha,
-        d_beta=entry.d_beta,
+        d_alpha=da,
+        d_beta=db,
         counted=status in COUNTED,
         stance=_STANCE.get(entry.stance, str(entry.stance)),
-        verdict="⊥" if status in REFUSAL_STATUSES else None,
+        verdict=symbol,
+        confidence=entry.confidence,
+        lambda_hat=lam,
+        weight=weight,
         corroborated_by=tuple(entry.corroborated_by or ()),
+        recorded=v is not None or entry.confidence is not None,
     )
 
 
@@ -122,6 +174,9 @@ def _folded(bucket: ProvenanceEntry) -> FoldedStory:
         d_beta=bucket.d_beta,
         first_event_id=s.first_event_id if s is not None else None,
         last_event_id=s.last_event_id if s is not None else None,
+        verdicts=dict(s.verdicts) if s is not None else {},
+        n_lambda_hat=s.n_lambda_hat if s is not None else 0,
+        mean_lambda_hat=s.mean_lambda_hat if s is not None else None,
     )
 
 
@@ -133,8 +188,14 @@ def count_phrase(counts: dict[str, int]) -> str:
     return f"{n} {noun}: {parts}" if parts else f"{n} {noun}"
 
 
+def verdict_phrase(verdicts: dict[str, int]) -> str:
+    """``"17 ⊥, 5 ⊤, 3 geometric"`` (verdicts by count, largest first; empty without any)."""
+    return ", ".join(f"{c} {v}" for v, c in sorted(verdicts.items(), key=lambda kv: (-kv[1], kv[0])) if c)
+
+
 def _sentence(predicate: str, p: float, tau: float, counts: dict[str, int], pending: int,
-              added: tuple[float, float]) -> str:
+              added: tuple[float, float], verdicts: dict[str, int], n_claims: int,
+              mean_lam: float | None) -> str:
     if not counts:
         return (f"Not committed: no evidence on {predicate}, so the belief is the prior "
                 f"(P = {p:.3f} ≤ τ = {tau:g}).")
@@ -146,6 +207,11 @@ def _sentence(predicate: str, p: float, tau: float, counts: dict[str, int], pend
         why += f", {refused} arrived contradicted (⊥) and do not"
     if counts.get(UNKNOWN_STATUS):
         why += f", {counts[UNKNOWN_STATUS]} were folded without a record of their status"
+    if mean_lam is not None:
+        claims = sum(verdicts.get(v, 0) for v in CLAIM_VERDICTS)
+        why += f"; {max(claims, n_claims)} claims, mean Λ̂ {mean_lam:.2f}"
+        if verdicts.get(_GEOMETRIC):
+            why += f", and {verdicts[_GEOMETRIC]} geometric observations"
     if pending:
         why += f"; {pending} still pending in a queue can change it"
     if p > tau:
@@ -155,8 +221,9 @@ def _sentence(predicate: str, p: float, tau: float, counts: dict[str, int], pend
 
 def explain(graph: SceneGraph, node: Any, predicate: str, *, tau: float = 0.5) -> BeliefStory:
     """The story of (node, predicate) in ``graph``: its compacted bucket's summary, then every
-    live entry in time order, the counts per status, and one sentence saying why the pair is or
-    is not committed at ``tau`` (committed iff P > tau)."""
+    live entry in time order, the counts per status and per verdict, the mean Lambda-hat of the
+    claims, and one sentence saying why the pair is or is not committed at ``tau`` (committed
+    iff P > tau)."""
     belief = graph.belief(node, predicate)
     alpha, beta = belief.alpha, belief.beta
     p = graph.probability(node, predicate)
@@ -165,11 +232,28 @@ def explain(graph: SceneGraph, node: Any, predicate: str, *, tau: float = 0.5) -
     live = sorted((e for e in entries if e.status is not EntryStatus.COMPACTED), key=lambda e: e.t)
     folded = _folded(buckets[0]) if buckets else None
     counts: dict[str, int] = dict(folded.counts) if folded is not None else {}
+    verdicts: dict[str, int] = {}
+    lam_total, n_claims, complete = 0.0, 0, True
+    if folded is not None:
+        verdicts.update(folded.verdicts)
+        # a bucket folded before verdicts were kept still knows its refusals from their statuses
+        folded_refused = sum(folded.counts.get(s.value, 0) for s in REFUSAL_STATUSES)
+        if folded_refused > verdicts.get(_BOTTOM, 0):
+            verdicts[_BOTTOM] = folded_refused
+        if sum(folded.verdicts.values()) < folded.n:
+            complete = False
+        if folded.mean_lambda_hat is not None:
+            lam_total, n_claims = folded.mean_lambda_hat * folded.n_lambda_hat, folded.n_lambda_hat
     events = tuple(map(_event, live))
     for ev in events:
         counts[ev.status] = counts.get(ev.status, 0) + 1
-    refused = sum(counts.get(s.value, 0) for s in REFUSAL_STATUSES)
-    verdicts = {"⊥": refused} if refused else {}
+        if ev.verdict is not None:
+            verdicts[ev.verdict] = verdicts.get(ev.verdict, 0) + 1
+        if ev.lambda_hat is not None:
+            lam_total += ev.lambda_hat
+            n_claims += 1
+        complete = complete and ev.recorded
+    mean_lam = lam_total / n_claims if n_claims else None
     pending = sum(1 for e in live if e.pending)
     return BeliefStory(
         node=node,
@@ -182,7 +266,11 @@ def explain(graph: SceneGraph, node: Any, predicate: str, *, tau: float = 0.5) -
         folded=folded,
         events=events,
         counts=counts,
-        verdicts=verdicts,
+        verdicts={v: verdicts[v] for v in VERDICT_SYMBOLS.values() if verdicts.get(v)},
+        n_claims=n_claims,
+        mean_lambda_hat=mean_lam,
         sentence=_sentence(predicate, p, tau, counts, pending,
-                           (alpha - graph.provenance.prior_alpha, beta - graph.provenance.prior_beta)),
+                           (alpha - graph.provenance.prior_alpha, beta - graph.provenance.prior_beta),
+                           verdicts, n_claims, mean_lam),
+        not_recorded=NOT_RECORDED if complete or not counts else f"{NOT_RECORDED}; {NOT_RECORDED_OLD}",
     )
