@@ -6,8 +6,13 @@ File layout (``format: sgbelief.scene_graph``, ``version: 1``)::
      "vocabulary": [...] | null, "clock": int, "meta": {...},
      "graph": <networkx node-link data, edges under "edges">,
      "provenance": {"prior": [a0, b0], "pairs": [{"node", "predicate", "alpha", "beta",
-                    "entries": [[event_id, t, d_alpha, d_beta, status, stance, corroborated_by, n_folded], ...]}],
+                    "entries": [[event_id, t, d_alpha, d_beta, status, stance, corroborated_by, n_folded,
+                                 (verdict, confidence)], ...], "fold_summary": {...} (optional)}],
                     "compacted_ids": [...], "n_compacted": int}}
+
+An entry's last two fields, the verdict code (:class:`~sgbelief.graph.provenance_log.EntryVerdict`
+or null) and the event's confidence, are present when the operator recorded either (8-field rows,
+of older files and of the baselines, load with None).
 
 The queues (revision quarantine Q, disagreement queue Q⊥) are the pending entries of the
 provenance log, so they round-trip with it. Loading validates the envelope with pydantic and

@@ -63,22 +63,9 @@ PairKey = tuple[Any, str]
 
 
 __all__ = [
-    "COUNTED",
-    "PENDING",
-    "EntryStatus",
-    "EntryVerdict",
-    "FoldSummary",
-    "Node",
-    "PairKey",
-    "PairLog",
-    "ProvenanceEntry",
-    "ProvenanceStore",
-    "belief_from_entries",
-    "event_list",
-    "fold_into_bucket",
-    "index_event",
-    "merge_into_bucket",
-    "settled_before",
+    "COUNTED", "PENDING", "EntryStatus", "EntryVerdict", "FoldSummary", "Node", "PairKey", "PairLog",
+    "ProvenanceEntry", "ProvenanceStore", "belief_from_entries", "event_list", "fold_into_bucket",
+    "index_event", "merge_into_bucket", "settled_before"
 ]
 
 _STATUS_BY_VALUE = {s.value: s for s in EntryStatus}

@@ -6,8 +6,9 @@ store holds it: the last point of the trace is the pair's current belief. Entrie
 recorded at the pair (a verification increment and the claim's own) form one trace event; a
 compacted bucket is one event standing for the entries it folded.
 
-The verdict of an event is what the provenance can tell: ⊥ for a refused claim (the refusal
-family); the saved log does not distinguish ⊤ from ∅ among accepted claims, so those read ``?``.
+The verdict of an event is the one its claim entry recorded (⊤ / ⊥ / ∅); for an entry written
+without one (a baseline, an older file) what its status tells: ⊥ for a refused claim (the refusal
+family), otherwise ``?``.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ class TraceEvent:
     event_id: str | None
     t: int
     status: str  #: what happened: the provenance status of the claim (refused, committed, ...)
-    verdict: str  #: ⊥ (refused), or ? (the saved log does not say whether ⊤ or ∅)
+    verdict: str  #: ⊤ / ⊥ / ∅ as recorded; else ⊥ (refused) or ? (the log does not say)
     d_alpha: float  #: the counted increments the event added at the pair
     d_beta: float
     folded: int  #: entries a compacted bucket stands for (1 for an ordinary event)
@@ -102,8 +103,10 @@ def belief_trace(graph: SceneGraph, node: Any, predicate: str, *, level: float =
         statuses = [e.status.value for e in grp]
         refused = next((s for s in statuses if s in REFUSED_STATUSES), None)
         status = refused or statuses[-1]
+        recorded = [e.verdict.symbol for e in grp if e.verdict is not None and e.verdict.is_claim]
         bel = BetaBelief(a, b)
         lo, hi = bel.interval(level)
-        events.append(TraceEvent(grp[0].event_id, int(grp[0].t), status, "⊥" if refused else "?", da, db,
+        verdict = recorded[-1] if recorded else "⊥" if refused else "?"
+        events.append(TraceEvent(grp[0].event_id, int(grp[0].t), status, verdict, da, db,
                                  sum(max(1, int(e.n_folded or 1)) for e in grp), bel.mean, lo, hi))
     return BeliefTrace(node, predicate, prior, tuple(events), level)
