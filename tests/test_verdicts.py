@@ -53,7 +53,7 @@ def _replay(name: str, engine: str, *, n: int = 200, seed: int = 3, t_prov: int 
             t_compact: int | None = None) -> tuple[SceneGraph, list[Any], list[Any]]:
     config = OperatorConfig.from_mapping({"t_prov": t_prov, "t_compact": t_compact, "tau_t": 0.1})
     op = make_operator(name, config, TABLE, engine=engine)  # type: ignore[arg-type]
-    graph = SceneGraph(engine=engine)  # type: ignore[arg-type]
+    graph = SceneGraph(engine=engine, create_nodes=True)  # type: ignore[arg-type]
     stream = random_stream(n, n_nodes=5, seed=seed)
     reports = [op.update(graph, ev, FrameLabels(labels)) for ev, labels in stream]
     return graph, [ev for ev, _ in stream], reports
