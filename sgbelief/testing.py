@@ -252,8 +252,8 @@ def apply_store_operations(store: ProvenanceStore, operations: Sequence[StoreOpe
     :func:`entry_state`, a RetractionError as its message) and every pair's belief after it
     (beliefs read without building entries). The calls:
 
-    ``("commit", node, predicate, event_id, t, d_alpha, d_beta, stance)``,
-    ``("record", node, predicate, event_id, t, d_alpha, d_beta, status, stance)``,
+    ``("commit", node, predicate, event_id, t, d_alpha, d_beta, stance[, verdict, confidence])``,
+    ``("record", node, predicate, event_id, t, d_alpha, d_beta, status, stance[, verdict, confidence])``,
     ``("transition", k, status, scale)`` (the k-th waiting entry of the queues, modulo),
     ``("transition_held", k, status, scale)`` (the k-th live entry a ``record`` or ``read_event``
     returned so far), ``("compact", before_t)``, ``("retract", event_id, cascade_window)``,
