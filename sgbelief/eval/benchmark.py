@@ -218,8 +218,9 @@ def belief_preservation_pool(events: Sequence[EventRecord], preds: Sequence[str]
 def brier_on_pairs(graph: SceneGraph, truth: dict, pairs: set[tuple[str, str]]) -> float:
     """Mean (p - y)^2 of the end-of-stream beliefs over ``pairs`` (nan for an empty pool)."""
     prov = graph.provenance
+    # fsum: the mean does not depend on the set's iteration order (string hashing varies per process)
     errs = [(prov.mean(n, p) - truth.get(n, {}).get(p, 0)) ** 2 for n, p in pairs]
-    return float(np.mean(errs)) if errs else math.nan
+    return math.fsum(errs) / len(errs) if errs else math.nan
 
 
 def element_trace(
