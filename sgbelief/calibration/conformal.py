@@ -75,10 +75,13 @@ def nonconformity(c: float, y: int) -> float:
 
 
 def conformal_quantile(sorted_scores: np.ndarray | list[float], alpha: float) -> float:
-    """The finite-sample split-conformal threshold q_hat of level ``alpha``.
+    """Eq. 1's threshold: the (1 - alpha) quantile q_hat_{1-alpha} of the slice's nonconformity scores.
 
-    The ceil((n + 1)(1 - alpha))-th smallest of the n scores: a fresh exchangeable score is
-    <= q_hat with probability >= 1 - alpha.
+    The finite-sample split-conformal rank::
+
+        q_hat_{1-alpha} = the ceil((n + 1)(1 - alpha))-th smallest of s(e_1, y_1), ..., s(e_n, y_n)
+
+    so a fresh exchangeable score is <= q_hat with probability >= 1 - alpha (Prop. 1).
 
     Parameters
     ----------

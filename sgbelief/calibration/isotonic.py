@@ -43,13 +43,16 @@ _log = math.log
 
 # ------------------------------------------------------------------------------- Eq. 2
 def calibrated_log_lr(p_hat: float, eps: float, log_reference_odds: float) -> float:
-    """Eq. 2: log Lambda_hat from the isotonic calibrated probability p_hat = p(y = 1 | c).
+    """Eq. 2: the calibrated likelihood ratio, as log Lambda_hat, from the isotonic calibrator.
 
-    By Bayes' rule p(c | y=1) / p(c | y=0) = odds(p_hat) / odds(pi), where pi is the probability of
-    y = 1 before the claim's confidence is seen. p_hat is clipped to [eps, 1 - eps] so the ratio
-    stays finite::
+    Eq. 2 is Lambda_hat(e) = p_hat(c | y = 1) / p_hat(c | y = 0). The conditional densities are
+    recovered by Bayes' rule from the isotonic calibrated probability p_hat = p_hat(y = 1 | c) and
+    the class base rate pi, the probability of y = 1 before the claim's confidence is seen::
 
+        Lambda_hat = [p_hat / (1 - p_hat)] * [(1 - pi) / pi]
         log Lambda_hat = log(p_hat / (1 - p_hat)) - log_reference_odds
+
+    with p_hat clipped to [eps, 1 - eps], so the ratio is always finite and positive.
 
     Parameters
     ----------
