@@ -196,8 +196,13 @@ class MondrianCalibrator:
         score = nonconformity(c, y)  # Eq. 1, the same at every level
         if adaptive is not None and adaptive.n_fit > 0:
             adaptive.conformal.observe(score, self.alpha, self._gamma)
-        for s in slices:
-            s.add_scored(c, y, score)
+        for s in slices:  # CalibrationSlice.add_scored, inlined (three levels per outcome)
+            cs = s.c
+            cs.append(c)
+            s.y.append(y)
+            s.sc.append(score)
+            if len(cs) >= s.refit_gap:
+                s.refit()
 
     def refit_all(self) -> None:
         """Commit every slice's pending outcomes."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from array import array
+from bisect import bisect_right
 from collections.abc import Sequence
 
 import numpy as np
@@ -237,4 +238,13 @@ class CalibrationSlice:
         (the base rate not divided out: odds against the uniform Beta(1, 1) prior)."""
         if self.stale:
             self.fit()
-        return calibrated_log_lr(interpolate(self._kx, self._ky, c), self.eps, self._log_prior_odds if reference else 0.0)
+        kx, ky = self._kx, self._ky
+        i = bisect_right(kx, c)  # interpolate(kx, ky, c), inlined: this runs once per claim and level
+        if i == 0:
+            p = ky[0]
+        elif i >= len(kx):
+            p = ky[-1]
+        else:
+            x0, x1 = kx[i - 1], kx[i]
+            p = ky[i] if x1 == x0 else ky[i - 1] + (ky[i] - ky[i - 1]) * (c - x0) / (x1 - x0)
+        return calibrated_log_lr(p, self.eps, self._log_prior_odds if reference else 0.0)
