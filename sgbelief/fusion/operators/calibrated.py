@@ -63,7 +63,8 @@ class CalibratedOperator(BaseOperator):
     U_cal consults the geometric channel only for calibration, never to refuse a claim.
     ``engine``: an :class:`~sgbelief.fusion.operators.base.OperatorEngine`; None or ``"reference"``
     run the named steps; ``sgbelief.make_operator(..., engine="fast")`` passes the fused loop
-    (same results).
+    (same results). The calibrator's isotonic store is the engine's ``isotonic`` when it has one
+    (the fused engine's incremental merge), else the reference refit (same knots).
     """
 
     name = "cal"
