@@ -33,12 +33,31 @@ class UnknownPredicateError(SgbeliefError, KeyError):
 class UnknownNodeError(SgbeliefError, KeyError):
     """A node id that is not in the scene graph."""
 
-    def __init__(self, node: object) -> None:
+    def __init__(self, node: object, event_id: str | None = None) -> None:
         self.node = node
-        super().__init__(f"unknown node {node!r}")
+        self.event_id = event_id
+        if event_id is None:
+            super().__init__(f"unknown node {node!r}")
+        else:
+            super().__init__(
+                f"event {event_id!r} targets unknown node {node!r}: add it first (graph.add_node), or "
+                "build the graph with create_nodes=True to let evidence create its nodes"
+            )
 
     def __str__(self) -> str:
         return str(self.args[0])
+
+
+class DuplicateEventError(SgbeliefError, ValueError):
+    """An event id that the graph's provenance already holds: ids are unique within a graph, so
+    that ``retract(id)`` names one event."""
+
+    def __init__(self, event_id: str) -> None:
+        self.event_id = event_id
+        super().__init__(
+            f"duplicate event id {event_id!r}: the graph already holds an event with this id "
+            "(ids must be unique within a graph, so that retract(id) names one event)"
+        )
 
 
 class ConfigError(SgbeliefError, ValueError):

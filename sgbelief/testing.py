@@ -101,7 +101,7 @@ def check_fusion_operator(operator: FusionOperator, *, n_events: int = 300, seed
     stream = random_stream(n_events, seed=seed)
     items = [(event, FrameLabels(labels)) for event, labels in stream]
     twins = {how: copy.deepcopy(operator) for how in ("report=False", "update_many", "batched")}
-    graph = SceneGraph()
+    graph = SceneGraph(create_nodes=True)
     resolutions = []
     for event, channel in items:
         report = operator.update(graph, event, channel)
@@ -118,18 +118,18 @@ def check_fusion_operator(operator: FusionOperator, *, n_events: int = 300, seed
         resolutions += report.resolutions
     assert operator.stats["events"] == n_events, 'stats["events"] must count the events applied'
     # the same stream without reports, through update_many and (with a pair rule) in waves
-    lean, lean_graph = twins["report=False"], SceneGraph()
+    lean, lean_graph = twins["report=False"], SceneGraph(create_nodes=True)
     for event, channel in items:
         report = lean.update(lean_graph, event, channel, report=False)
         assert report.targets == (), "update(..., report=False) must return a report without targets"
-    many, many_graph = twins["update_many"], SceneGraph()
+    many, many_graph = twins["update_many"], SceneGraph(create_nodes=True)
     many_res = many.update_many(many_graph, items)
     assert list(many_res) == resolutions, "update_many must return the queue resolutions the reports hold"
     for how, (op, g) in {"update(..., report=False)": (lean, lean_graph), "update_many": (many, many_graph)}.items():
         assert _beliefs(g) == _beliefs(graph), f"{how} must give the beliefs update() gives on the same stream"
         assert op.stats == operator.stats, f"{how} must count what update() counts"
     if rule is not None:
-        waved, waved_graph = twins["batched"], SceneGraph()
+        waved, waved_graph = twins["batched"], SceneGraph(create_nodes=True)
         batched_replay(EventColumns.from_records([event for event, _ in stream]), waved, graph=waved_graph)
         assert provenance_signature(waved_graph) == provenance_signature(many_graph), (
             "an operator with a pair_rule must give through the batched engine the map it gives event by event"
@@ -187,7 +187,7 @@ def check_fast_matches_reference(
     for engine in ("reference", "fast"):
         op = make_operator(name, config, vocab, engine=engine)  # type: ignore[arg-type]
         assert (getattr(op, "engine", None) is REFERENCE) == (engine == "reference"), f"{name!r} has no fast engine"
-        graph = SceneGraph()
+        graph = SceneGraph(create_nodes=True)
         reports = [op.update(graph, event, FrameLabels(labels)) for event, labels in stream]
         if final_tick is not None:
             op.tick(graph, final_tick)

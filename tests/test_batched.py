@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from sgbelief._fast.batched import EventColumns, batched_replay
 from sgbelief.api.operators import make_operator
+from sgbelief.errors import DuplicateEventError, FormatError
 from sgbelief.eval.formats import EventRecord
 from sgbelief.eval.random_stream import random_records
 from sgbelief.eval.replay import OperatorRun, make_runs, replay
@@ -29,7 +30,7 @@ def test_the_pair_local_baselines_declare_their_rule() -> None:
 def _streaming(records: list[EventRecord], name: str, config: dict[str, Any] | None = None, *,
                prior: tuple[float, float] = (1.0, 1.0), remember: int = 100_000) -> OperatorRun:
     run = make_runs([name], None, config)[0]
-    run.graph = SceneGraph(prior=prior)
+    run.graph = SceneGraph(prior=prior, create_nodes=True)
     run.graph.provenance.remember_compacted = remember
     replay(records, [run])
     return run
@@ -37,15 +38,24 @@ def _streaming(records: list[EventRecord], name: str, config: dict[str, Any] | N
 
 def _batched(records: list[EventRecord], name: str, config: dict[str, Any] | None = None, *,
              prior: tuple[float, float] = (1.0, 1.0), remember: int = 100_000) -> tuple[SceneGraph, dict[str, int]]:
-    graph = SceneGraph(prior=prior)
+    graph = SceneGraph(prior=prior, create_nodes=True)
     graph.provenance.remember_compacted = remember
     return batched_replay(EventColumns.from_records(records), name, None, config, graph=graph)
 
 
 def _assert_same(records: list[EventRecord], name: str, config: dict[str, Any] | None = None,
-                 **store: Any) -> SceneGraph:
-    """Streaming and batched replay agree on everything observable; returns the batched graph."""
-    run = _streaming(records, name, config, **store)
+                 **store: Any) -> SceneGraph | None:
+    """Streaming and batched replay agree on everything observable; returns the batched graph.
+    When the streaming engine rejects an event whose id still has live entries, the batched
+    engine rejects the same event (and None is returned)."""
+    try:
+        run = _streaming(records, name, config, **store)
+    except FormatError as streaming:  # replay names the line; the operator's error is the cause
+        assert isinstance(streaming.__cause__, DuplicateEventError)
+        with pytest.raises(DuplicateEventError) as batched:
+            _batched(records, name, config, **store)
+        assert batched.value.event_id == streaming.__cause__.event_id
+        return None
     graph, stats = _batched(records, name, config, **store)
     assert provenance_signature(graph) == provenance_signature(run.graph)
     assert graph.provenance.to_dict() == run.graph.provenance.to_dict()
@@ -103,7 +113,11 @@ def test_repeated_event_ids_and_custom_prior(name: str) -> None:
     records = [r._replace(id=f"dup{i % 23}" if i % 3 else None) for i, r in enumerate(recs)]
     cols = EventColumns.from_records(records)
     assert cols.unique_ids is False
-    _assert_same(records, name, {"t_prov": 4, "tau_t": 0.12}, prior=(0.5, 2.0), remember=40)
+    # ids come back while their entries are live: both engines reject the same event
+    assert _assert_same(records, name, {"t_prov": 4, "tau_t": 0.12}, prior=(0.5, 2.0), remember=40) is None
+    # with every event one compaction apart, an id comes back only once it is folded away
+    spaced = [r._replace(t=10 * i) for i, r in enumerate(records)]
+    assert _assert_same(spaced, name, {"t_prov": 4, "tau_t": 0.12}, prior=(0.5, 2.0), remember=40) is not None
 
 
 @pytest.mark.parametrize("remember", [1, 2, 4, 7])
@@ -156,7 +170,7 @@ def test_batched_rejects_calibrated_operators_and_decreasing_time() -> None:
     cols.event = cols.event[::-1].copy()
     with pytest.raises(ValueError, match="stream order"):
         batched_replay(cols, "majority")
-    graph = SceneGraph()
+    graph = SceneGraph(create_nodes=True)
     graph.add_node("x")
     with pytest.raises(ValueError, match="empty graph"):
         batched_replay(EventColumns.from_records(random_records(0, 5)), "majority", graph=graph)

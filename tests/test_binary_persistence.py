@@ -48,7 +48,7 @@ LOADERS = [pytest.param(load_reference, id="reference"), pytest.param(load_fast,
 # ---------------------------------------------------------------- helpers
 def _rich_graph() -> SceneGraph:
     """Relations, odd attributes, int ids, pending queues, compacted buckets, corroborated entries."""
-    g = SceneGraph(vocabulary=["is_car", "is_pedestrian", "is_chair"])
+    g = SceneGraph(vocabulary=["is_car", "is_pedestrian", "is_chair"], create_nodes=True)
     g.add_node("n0", centroid=(0, 0, 0.5), bbox=((-0.3, -0.3, 0), (0.3, 0.3, 1.0)), label="chair", scene="s0",
                views=3, seen=True, track=[[0, 1.0, 2.0, 3.0], [4, 1.5, 2.5, 3.5]], notes={"a": [1, None, "x"]},
                nothing=None, nul="a\x00b", uni="ü→✓", big=2**70, ratio=0.25, vec=(1.0, 2.0))
@@ -170,7 +170,7 @@ def test_directory_dispatch_and_format_keyword(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("load", LOADERS)
 def test_empty_graph_and_distinct_but_equal_node_objects(tmp_path: Path, load: Any) -> None:
-    g = SceneGraph()
+    g = SceneGraph(create_nodes=True)
     assert graph_to_dict(load(g.save(tmp_path / "e.npz"))) == graph_to_dict(g)
     g.add_node("".join(["n", "1"]), scene="a")
     g.add_node(10**30, scene=5)  # int id beyond int64; attribute column of mixed types
@@ -246,7 +246,7 @@ _C = EntryStatus.COMMITTED
                ("compact", 0)])
 def test_random_streams_round_trip_and_stay_usable(tmp_path: Path, ops: list[tuple[Any, ...]],
                                                    more: list[tuple[Any, ...]]) -> None:
-    g = SceneGraph()
+    g = SceneGraph(create_nodes=True)
     for n in ("a", "b", 3):
         g.add_node(n, centroid=(0.0, 1.0, 2.0))
     _apply(g, ops)
@@ -326,7 +326,7 @@ def test_cli_inspect_query_and_replay_accept_npz(tmp_path: Path, saved: tuple[Sc
     assert summary["nodes"] == len(g) and summary["pending_quarantine"] == 1
     assert main(["inspect", str(path), "n0", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["node"] == "n0"
-    q = SceneGraph()
+    q = SceneGraph(create_nodes=True)
     q.add_node("c", bbox=((0.3, 0.8, 0), (0.8, 1.3, 0.95)), label="chair", scene="r")
     q.add_node("w", bbox=((1.6, -0.5, 0.9), (1.7, 1.0, 2.0)), label="window", scene="r")
     q.provenance.record("c", "is_chair", "e1", 0, 3.0, 0.0)
@@ -528,7 +528,7 @@ def test_layout_arrays_and_header(saved: tuple[SceneGraph, Path]) -> None:
 # ------------------------------------------------- large columns (chunked passes, shared values)
 def _big_graph(n: int) -> SceneGraph:
     """More rows than one save chunk; constant, few-valued and signed-zero columns; mixed log lengths."""
-    g = SceneGraph()
+    g = SceneGraph(create_nodes=True)
     for i in range(n):
         g.add_node(f"n{i}", bbox=((float(i), -0.0, 0.0), (i + 0.5, 1.0, 2.0)), floor_z=-0.0 if i % 7 else 0.0,
                    w=1.5, k=3, scene=f"s{i // 100}")
@@ -567,7 +567,7 @@ def test_large_graph_round_trip_is_bit_exact(tmp_path: Path, load: Any) -> None:
 
 def test_irregular_row_in_a_later_chunk(tmp_path: Path) -> None:
     _CHUNK = CHUNK
-    g = SceneGraph()
+    g = SceneGraph(create_nodes=True)
     for i in range(_CHUNK + 10):
         g.add_node(i, centroid=(float(i), 0.0, 1.0), vec=(1.0, float(i)))
     g.node_attrs(_CHUNK + 3)["vec"] = (1.0, 2.0, 3.0)  # another shape, past the first chunk
@@ -597,7 +597,7 @@ def test_pylist_shares_only_bit_identical_values() -> None:
 def test_load_without_pending_entries_defers_every_entry(tmp_path: Path) -> None:
     """No queue entries: loading makes no entry object and does not even split the event ids;
     beliefs are there at once and the first log read gives the original logs."""
-    g = SceneGraph()
+    g = SceneGraph(create_nodes=True)
     for i in range(50):
         g.add_node(f"n{i}")
         g.provenance.commit(f"n{i}", "is_car", f"e{i}", i, 0.5 + i, 0.25)
@@ -635,7 +635,7 @@ def test_deferred_load_is_invisible(tmp_path_factory: pytest.TempPathFactory, be
     """A fast load defers its settled entries: the same calls on the deferred store, on one
     materialised right after loading and on the reference loader's store return the same and
     leave the same store."""
-    g = SceneGraph()
+    g = SceneGraph(create_nodes=True)
     g.provenance.remember_compacted = remember
     apply_store_operations(g.provenance, before)
     for node in ("a", "b"):

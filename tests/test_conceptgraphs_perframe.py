@@ -126,7 +126,7 @@ def test_external_graph_evidence_is_still_read() -> None:
     from sgbelief.api.operators import make_operator
     from sgbelief.graph.scene_graph import SceneGraph
 
-    g = SceneGraph()
+    g = SceneGraph(create_nodes=True)
     op = make_operator("majority")
     for t in range(5):  # evidence the backend never routed
         op.update(g, EvidenceEvent({"cg-0": 1.0}, "is_sofa", 0.99, "other", t))

@@ -25,7 +25,7 @@ NO_COMPACTION = 1_000_000
 def _run(name: str, n: int, seed: int, t_prov: int, *, engine: str = "fast", t_compact: int | None = None
          ) -> SceneGraph:
     config = OperatorConfig.from_mapping({"t_prov": t_prov, "t_compact": t_compact, "tau_t": 0.1})
-    op, graph = make_operator(name, config, TABLE, engine=engine), SceneGraph(engine=engine)  # type: ignore[arg-type]
+    op, graph = make_operator(name, config, TABLE, engine=engine), SceneGraph(engine=engine, create_nodes=True)  # type: ignore[arg-type]
     for ev, labels in random_stream(n, n_nodes=5, seed=seed):
         op.update(graph, ev, FrameLabels(labels))
     return graph
@@ -83,7 +83,7 @@ def test_a_file_without_fold_summaries_loads_with_unknown_counts(tmp_path) -> No
 
 
 def test_sentence_is_strict_at_tau() -> None:
-    graph = SceneGraph(vocabulary=["is_car"])
+    graph = SceneGraph(vocabulary=["is_car"], create_nodes=True)
     graph.add_node("a")
     story = graph.explain("a", "is_car")
     assert not story.committed and story.probability == 0.5 and "no evidence" in story.sentence
@@ -96,7 +96,7 @@ def test_sentence_is_strict_at_tau() -> None:
 
 
 def test_refused_entries_are_bottom_and_not_counted() -> None:
-    graph = SceneGraph(vocabulary=["is_car"])
+    graph = SceneGraph(vocabulary=["is_car"], create_nodes=True)
     graph.add_node("a")
     graph.provenance.record("a", "is_car", "e1", 0, 0.0, 2.0, EntryStatus.REFUSED, -1)
     graph.provenance.commit("a", "is_car", "e2", 1, 2.0, 0.0, 1)

@@ -18,7 +18,7 @@ from sgbelief.fusion.channel import FrameLabels
 
 
 def _graph() -> SceneGraph:
-    g = SceneGraph()
+    g = SceneGraph(create_nodes=True)
     g.add_node("chair1", centroid=(0, 0, 0.5), bbox=((-0.3, -0.3, 0), (0.3, 0.3, 1.0)), label="chair", scene="s0")
     g.add_node("table1", centroid=(1, 0, 0.4))
     g.add_node(3)
@@ -53,7 +53,7 @@ def test_beliefs_and_commit_threshold_is_strict() -> None:
 
 
 def test_vocabulary_makes_predicates_strict() -> None:
-    g = SceneGraph(vocabulary=SubsumptionTable.shipped("scannet"))
+    g = SceneGraph(vocabulary=SubsumptionTable.shipped("scannet"), create_nodes=True)
     g.add_node("a")
     with pytest.raises(UnknownPredicateError, match="is_chair"):
         g.probability("a", "is_chiar")
@@ -150,7 +150,7 @@ def test_remove_node_drops_beliefs() -> None:
 def test_probabilities_is_probability_per_node() -> None:
     from sgbelief.errors import UnknownNodeError, UnknownPredicateError
 
-    g = SceneGraph(vocabulary={"is_car", "is_chair"})
+    g = SceneGraph(vocabulary={"is_car", "is_chair"}, create_nodes=True)
     for n in ("a", "b", 7):
         g.add_node(n)
     g.provenance.record("a", "is_car", "e1", 0, 2.0, 0.5)
@@ -175,7 +175,7 @@ def test_probabilities_is_probability_per_node() -> None:
 
 
 def test_bulk_reads_over_the_whole_map() -> None:
-    g = SceneGraph(vocabulary={"is_car"})
+    g = SceneGraph(vocabulary={"is_car"}, create_nodes=True)
     for n in ("a", "b", 7):
         g.add_node(n, label=str(n))
     g.provenance.record(7, "is_car", "e1", 0, 2.0, 0.5)
@@ -184,4 +184,4 @@ def test_bulk_reads_over_the_whole_map() -> None:
     assert g.probabilities(None, "is_car") == [g.probability(n, "is_car") for n in g.nodes()]
     with pytest.raises(UnknownPredicateError):
         g.probabilities(None, "is_boat")
-    assert SceneGraph().probabilities(None, "anything") == []  # no node: nothing is checked
+    assert SceneGraph(create_nodes=True).probabilities(None, "anything") == []  # no node: nothing is checked

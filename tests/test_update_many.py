@@ -44,11 +44,11 @@ def _items(n: int, seed: int) -> list[tuple[Any, FrameLabels]]:
        cuts=st.lists(st.integers(0, 160), max_size=8))
 def test_update_many_equals_update_event_by_event(name: str, seed: int, cuts: list[int]) -> None:
     items = _items(160, seed)
-    one, g_one = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates)
+    one, g_one = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
     res_one = []
     for ev, ch in items:
         res_one += one.update(g_one, ev, ch, report=False).resolutions
-    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates)
+    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
     res_many = []
     bounds = sorted({0, len(items), *cuts})
     for a, b in zip(bounds, bounds[1:]):
@@ -61,9 +61,9 @@ def test_update_many_equals_update_event_by_event(name: str, seed: int, cuts: li
 def test_update_many_matches_reporting_updates(name: str) -> None:
     """Reports on: the same state, and the reports' resolutions are what update_many returns."""
     items = _items(200, 3)
-    rep, g_rep = make_operator(name, CONFIG, TABLE), SceneGraph()
+    rep, g_rep = make_operator(name, CONFIG, TABLE), SceneGraph(create_nodes=True)
     res_rep = [r for ev, ch in items for r in rep.update(g_rep, ev, ch).resolutions]
-    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraph()
+    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraph(create_nodes=True)
     res_many = many.update_many(g_many, iter(items))  # any iterable
     assert _state(many, g_many, res_many) == _state(rep, g_rep, res_rep)
     if name in ("cal", "comod"):
@@ -75,10 +75,10 @@ def test_a_rejected_event_leaves_the_events_before_it_applied(name: str) -> None
     items = _items(60, 7)
     bad = dataclasses.replace(items[40][0], predicate="is_unicorn")
     stream = items[:40] + [(bad, items[40][1])] + items[41:]
-    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates)
+    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
     with pytest.raises(UnknownPredicateError):
         many.update_many(g_many, stream)
-    one, g_one = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates)
+    one, g_one = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
     res_one = []
     for ev, ch in items[:40]:
         res_one += one.update(g_one, ev, ch, report=False).resolutions
@@ -159,19 +159,19 @@ def test_a_subclass_rule_is_what_every_path_applies(engine: str) -> None:
         pair_rule = Flipped()
 
     items = _items(50, 2)
-    one, g_one = Contrarian(CONFIG, TABLE), SceneGraph()
+    one, g_one = Contrarian(CONFIG, TABLE), SceneGraph(create_nodes=True)
     for ev, ch in items:
         one.update(g_one, ev, ch)
-    many, g_many = Contrarian(CONFIG, TABLE), SceneGraph()
+    many, g_many = Contrarian(CONFIG, TABLE), SceneGraph(create_nodes=True)
     many.update_many(g_many, items)
     assert _state(many, g_many, []) == _state(one, g_one, [])
-    majority, g_majority = make_operator("majority", CONFIG, TABLE), SceneGraph()
+    majority, g_majority = make_operator("majority", CONFIG, TABLE), SceneGraph(create_nodes=True)
     majority.update_many(g_majority, items)
     assert provenance_signature(g_majority) != provenance_signature(g_many)
     recs = random_records(2, 600, n_nodes=6, predicates=tuple(TABLE.predicates), labels=("car", None))
     runs = make_runs([Contrarian(CONFIG, TABLE)], TABLE, CONFIG)
     replay(recs, runs, engine=engine)
-    ref, g_ref = Contrarian(CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates)
+    ref, g_ref = Contrarian(CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
     ref.update_many(g_ref, [_to_event(r, i) for i, r in enumerate(recs)])
     assert provenance_signature(runs[0].graph) == provenance_signature(g_ref)
     assert runs[0].operator.stats == ref.stats
@@ -204,7 +204,7 @@ def test_an_operator_without_a_rule_gives_the_clear_error() -> None:
         for run in (lambda op, g: op.update_many(g, [(ok, None), (bad, None)]),
                     lambda op, g: [op.update(g, e, None, report=False) for e in (ok, bad)],
                     lambda op, g: [op.update(g, e, None) for e in (ok, bad)]):
-            op, g = Partial(engine=engine), SceneGraph()
+            op, g = Partial(engine=engine), SceneGraph(create_nodes=True)
             with pytest.raises(NotImplementedError, match="Partial"):
                 run(op, g)
             assert g.provenance.alpha_beta("a", "is_car") == (1.9, 1.1) and op.stats["events"] == 1

@@ -26,7 +26,7 @@ TABLE = conformance_table()
 
 def _run(name: str, n: int, seed: int, t_prov: int = 100_000) -> tuple[SceneGraph, list]:
     config = OperatorConfig.from_mapping({"t_prov": t_prov, "tau_t": 0.1})
-    op, graph = make_operator(name, config, TABLE), SceneGraph()
+    op, graph = make_operator(name, config, TABLE), SceneGraph(create_nodes=True)
     stream = random_stream(n, n_nodes=5, seed=seed)
     for ev, labels in stream:
         op.update(graph, ev, FrameLabels(labels))
@@ -94,7 +94,7 @@ def test_compacted_history_is_drawn_as_buckets() -> None:
 
 
 def test_trace_of_a_pair_without_entries_is_empty() -> None:
-    tr = belief_trace(SceneGraph(), "x", "is_car")
+    tr = belief_trace(SceneGraph(create_nodes=True), "x", "is_car")
     assert tr.events == () and tr.final == (1.0, 1.0) and tr.steps() == ([], [], [], [])
 
 

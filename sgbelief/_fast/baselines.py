@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from sgbelief.errors import UnknownPredicateError
+from sgbelief.errors import DuplicateEventError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion.protocol import (
     Action,
     Items,
@@ -77,6 +77,8 @@ def apply_fused(op: BaseOperator, graph: SceneGraph, items: Items, reports: list
     pairs_get = prov._pairs.get
     prior_a, prior_b = prov.prior_alpha, prov.prior_beta
     gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
+    has_event = prov.has_event
+    create_nodes = graph.create_nodes
     tick = op.tick
     out: list[QueueResolution] = []
     n_events = n_targets = n_below = n_committed = 0
@@ -86,6 +88,13 @@ def apply_fused(op: BaseOperator, graph: SceneGraph, items: Items, reports: list
             pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
             if vocab is not None and pred not in vocab:
                 raise UnknownPredicateError(pred, vocab)
+            # the rest of fusion.operators.base.check_admissible, inlined
+            if has_event(eid):
+                raise DuplicateEventError(eid)
+            if not create_nodes:
+                for node in event.targets:
+                    if node not in gnx:
+                        raise UnknownNodeError(node, eid)
             resolutions = tick(graph, t) if t > graph.clock else None
             if linear:
                 p, q = split(c)  # type: ignore[misc]

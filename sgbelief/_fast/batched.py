@@ -42,7 +42,7 @@ import numpy as np
 
 from sgbelief._fast.fsum_groups import group_fsums
 from sgbelief._fast.gc import relaxed_gc
-from sgbelief.errors import UnknownPredicateError
+from sgbelief.errors import DuplicateEventError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.operators.compaction import CompactionSchedule
@@ -366,6 +366,34 @@ def _index_live(cols: EventColumns, idr: _IdRuns, ev: np.ndarray, n_fold: int,
     return by_event
 
 
+def _first_live_duplicate(cols: EventColumns, ev: np.ndarray, fold_k: np.ndarray, opens: np.ndarray) -> int | None:
+    """The first event whose id still has live entries when it arrives, or None: the event the
+    streaming engine rejects (:func:`sgbelief.fusion.operators.base.check_admissible` runs before
+    the event's own tick, so entries that its tick compacts are still live).
+
+    Only the id's latest earlier event that recorded entries matters: compaction folds a time
+    prefix, so when that one is folded every earlier one is."""
+    ids = cols.event_ids
+    unique = cols.unique_ids if cols.unique_ids is not None else len(set(ids)) == len(ids)
+    if unique or not len(ev):
+        return None
+    n = cols.n_events
+    index = _FirstSeen()
+    code = np.fromiter(map(index.__getitem__, ids), dtype=np.int64, count=n)
+    first = _starts(ev)  # each recording event's first entry (an event's entries fold together)
+    folded_at = np.full(n, -1, dtype=np.int64)  # -1: recorded nothing
+    folded_at[ev[first]] = np.r_[opens, n][fold_k[first]]  # the event whose tick folds them (n: never)
+    order = _stable_argsort(code, len(index))  # by id, stream order within an id
+    pos = np.arange(n)
+    latest = np.maximum.accumulate(np.where(folded_at[order] >= 0, pos, -1))
+    before = np.r_[-1, latest[:-1]]  # the latest earlier recording position (any id so far)
+    group = np.maximum.accumulate(np.where(np.r_[True, code[order][1:] != code[order][:-1]], pos, 0))
+    same_id = before >= group
+    live = same_id & (folded_at[order][np.maximum(before, 0)] >= order)
+    hits = order[live]
+    return int(hits.min()) if len(hits) else None
+
+
 # ------------------------------------------------------------------ the store
 def _check_fresh(graph: SceneGraph) -> None:
     prov = graph.provenance
@@ -430,9 +458,11 @@ def batched_replay(
                          f"(use the streaming engine)")
     cfg = op.config
     if graph is None:
-        graph = SceneGraph(vocabulary=vocabulary if (strict and vocabulary is not None) else None)
+        graph = SceneGraph(vocabulary=vocabulary if (strict and vocabulary is not None) else None, create_nodes=True)
     else:
         _check_fresh(graph)
+        if not graph.create_nodes and cols.n_events and len(cols.pair):  # as check_admissible
+            raise UnknownNodeError(cols.pairs[int(cols.pair[0])][0], cols.event_ids[int(cols.event[0])])
     if graph.vocabulary is not None:
         for pred in cols.predicates:
             if pred not in graph.vocabulary:
@@ -471,16 +501,19 @@ def _replay_waves(cols: EventColumns, rule: PairRule, tau_t: float, schedule: Co
     # ---- time: clock and compaction schedule (a pass runs when an event opens a new epoch)
     epoch = schedule.epoch(t_ev)
     opens = np.flatnonzero(epoch > np.maximum.accumulate(np.r_[schedule.last_epoch(graph.meta), epoch[:-1]]))
-    graph.clock = max(int(t_ev[-1]), -1)
-    if len(opens):
-        schedule.record(graph.meta, int(epoch[opens[-1]]))
-    if n == 0:
-        return
     # entry e exists from its event on; compaction k folds it if k runs after that event and its
     # horizon exceeds e's t. Both bounds grow with the entry's position, so fold_k is
     # non-decreasing and the folded entries are a prefix of the stream.
     fold_k = np.maximum(np.searchsorted(opens, ev, side="right"),
                         np.searchsorted(schedule.horizon(t_ev[opens]), t_entry, side="right"))
+    dup = _first_live_duplicate(cols, ev, fold_k, opens)
+    if dup is not None:  # before any change, as the streaming engine's check_admissible
+        raise DuplicateEventError(cols.event_ids[dup])
+    graph.clock = max(int(t_ev[-1]), -1)
+    if len(opens):
+        schedule.record(graph.meta, int(epoch[opens[-1]]))
+    if n == 0:
+        return
     n_fold = int(np.count_nonzero(fold_k < len(opens)))
     stats["compacted"] = n_fold
 

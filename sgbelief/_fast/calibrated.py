@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 from sgbelief._fast.isotonic import IncrementalIsotonic
 from sgbelief.calibration.conformal import ConformalSlice
-from sgbelief.errors import UnknownPredicateError
+from sgbelief.errors import DuplicateEventError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion import queues
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import Verdict
@@ -82,6 +82,8 @@ def apply_fused(
     pending_map = prov._pending_by_pair  # pairs with entries waiting in Q or Q_bot
     prior_a, prior_b = prov.prior_alpha, prov.prior_beta
     gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
+    has_event = prov.has_event
+    create_nodes = graph.create_nodes
     tables = op.vocabulary.outcome_tables() if op.vocabulary is not None else None
     comod = op.check_compatibility
     geo = op.observes_geometry
@@ -100,6 +102,13 @@ def apply_fused(
             pred, c, ctx, eid, t = event.predicate, event.confidence, event.context, event.id, event.t
             if vocab is not None and pred not in vocab:
                 raise UnknownPredicateError(pred, vocab)
+            # the rest of fusion.operators.base.check_admissible, inlined
+            if has_event(eid):
+                raise DuplicateEventError(eid)
+            if not create_nodes:
+                for node in event.targets:
+                    if node not in gnx:
+                        raise UnknownNodeError(node, eid)
             resolutions = tick(graph, t) if t > graph.clock else []
             outcome_of = tables.get(pred) if tables is not None else None
             label_of = None

@@ -58,6 +58,9 @@ class DeferredEntries(Protocol):
     def build(self, store: ProvenanceStore) -> None:
         """Fill the loaded pairs' entry lists, the event index and the timeline of ``store``."""
 
+    def has_event(self, event_id: str) -> bool:
+        """Whether a loaded (not yet built) entry carries this event id."""
+
 
 class JournalledProvenanceStore(ProvenanceStore):
     """:class:`~sgbelief.graph.provenance.ProvenanceStore` with committed increments journaled
@@ -83,6 +86,9 @@ class JournalledProvenanceStore(ProvenanceStore):
         self._j_checked = 0
         self._j_last_t: float = -math.inf
         self._j_id_t: dict[str, int] = {}
+        # the event ids of the journal's records (has_event without materialising)
+        self._j_ids: set[str | None] = set()
+        self._j_ids_add = self._j_ids.add
         # entries a loader has not built yet (then _journal[0] is DEFERRED); see defer_entries()
         self._deferred: DeferredEntries | None = None
 
@@ -100,6 +106,7 @@ class JournalledProvenanceStore(ProvenanceStore):
         log.alpha += d_alpha
         log.beta += d_beta
         self._journal.append((key, event_id, t, d_alpha, d_beta, stance, log))
+        self._j_ids_add(event_id)
 
     def materialize(self) -> None:
         """Turn the journal into entries (logs, event index, timeline), exactly as ``record`` would
@@ -111,6 +118,7 @@ class JournalledProvenanceStore(ProvenanceStore):
         self._journal = []
         self._j_checked, self._j_last_t = 0, -math.inf
         self._j_id_t.clear()
+        self._j_ids.clear()
         if journal[0] is DEFERRED:  # a loader's entries come before every journal record
             deferred, self._deferred = self._deferred, None
             assert deferred is not None
@@ -163,9 +171,10 @@ class JournalledProvenanceStore(ProvenanceStore):
         return ProvenanceStore.event_index(self)
 
     def has_event(self, event_id: str) -> bool:
-        if self._journal:
-            self.materialize()
-        return event_id in self._by_event
+        if event_id in self._by_event or event_id in self._j_ids:
+            return True
+        deferred = self._deferred
+        return deferred is not None and deferred.has_event(event_id)
 
     def logs(self) -> Mapping[PairKey, PairLog]:
         if self._journal:
@@ -291,6 +300,8 @@ class JournalledProvenanceStore(ProvenanceStore):
     def drop_folded_records(self, k: int) -> None:
         """Remove the first ``k`` journal records (folded by a compaction pass)."""
         journal = self._journal
+        # every record of a folded id is folded (an id has one t and the fold takes a time prefix)
+        self._j_ids.difference_update(map(record_event_id, islice(journal, k)))
         del journal[:k]
         self._j_checked -= k
         if len(self._j_id_t) > 2 * len(journal) + 1024:  # drop the folded ids, in one C pass

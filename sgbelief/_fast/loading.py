@@ -41,6 +41,15 @@ class DeferredLoad:
         self.columns = columns
         #: entry index -> the entry already made (the pending ones)
         self.pending = pending
+        self._event_ids: set[str] | None = None  # built on the first has_event
+
+    def has_event(self, event_id: str) -> bool:
+        """Whether a loaded entry carries this id (a set of the id column, built once)."""
+        ids = self._event_ids
+        if ids is None:
+            cols = self.columns
+            ids = self._event_ids = set(cols.eid_array()[~cols.null].tolist())
+        return event_id in ids
 
     def build(self, store: ProvenanceStore) -> None:
         with young_collections_only():  # ~10⁶ long-lived objects, as in the load itself

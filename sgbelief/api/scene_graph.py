@@ -69,8 +69,11 @@ class SceneGraph(model.SceneGraph):
         prior: tuple[float, float] = (PRIOR_ALPHA, PRIOR_BETA),
         name: str | None = None,
         engine: Engine = "fast",
+        create_nodes: bool = False,
     ) -> None:
-        super().__init__(vocabulary, prior=prior, name=name, provenance=provenance_store(engine, prior))
+        super().__init__(
+            vocabulary, prior=prior, name=name, provenance=provenance_store(engine, prior), create_nodes=create_nodes
+        )
 
     def save(self, path: str | Path, *, format: str | None = None) -> Path:
         """Save losslessly and atomically; returns the file written.

@@ -228,7 +228,7 @@ def element_trace(
     """Posterior mean and 90 % interval of one (node, predicate) after each event that targets it."""
     node, pred = pair
     ops = {name: make_operator(name, config, table) for name in TRACE_OPERATORS}
-    graphs = {name: SceneGraph() for name in ops}
+    graphs = {name: SceneGraph(create_nodes=True) for name in ops}
     trace: dict[str, list] = {name: [] for name in ops}
     contradictions: list[int] = []
     k = 0

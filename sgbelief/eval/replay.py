@@ -90,7 +90,7 @@ def make_runs(
     runs = []
     for op in operators:
         inst = make_operator(op, config, vocabulary)
-        graph = SceneGraph(vocabulary=vocabulary if (strict and vocabulary is not None) else None)
+        graph = SceneGraph(vocabulary=vocabulary if (strict and vocabulary is not None) else None, create_nodes=True)
         runs.append(OperatorRun(inst.name, inst, graph))
     return runs
 

@@ -86,7 +86,7 @@ class CompoundScore:
 
 
 def _build_graph(nodes: Mapping[Any, Mapping[str, Any]], vocabulary: Any = None) -> SceneGraph:
-    g = SceneGraph(vocabulary=vocabulary)
+    g = SceneGraph(vocabulary=vocabulary, create_nodes=True)
     for node, attrs in nodes.items():
         g.add_node(node, **dict(attrs))
     return g

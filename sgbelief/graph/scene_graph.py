@@ -41,6 +41,10 @@ class SceneGraph:
     ``vocabulary``: when given (an iterable of predicate names, or an object with a
     ``predicates`` attribute such as a SubsumptionTable), belief reads and updates of any other
     predicate raise :class:`~sgbelief.errors.UnknownPredicateError` (typo protection).
+
+    ``create_nodes``: whether evidence that targets a node id the graph does not hold adds that
+    node. Off by default, so a mistyped id raises :class:`~sgbelief.errors.UnknownNodeError`
+    instead of making a ghost node; on for graphs built from evidence logs (replays, benches).
     """
 
     def __init__(
@@ -50,6 +54,7 @@ class SceneGraph:
         prior: tuple[float, float] = (PRIOR_ALPHA, PRIOR_BETA),
         name: str | None = None,
         provenance: ProvenanceStore | None = None,
+        create_nodes: bool = False,
     ) -> None:
         self.nx: nx.MultiDiGraph = nx.MultiDiGraph(name=name or "sgbelief")
         #: the beliefs and their logs; ``provenance``: an empty store to use instead of a
@@ -59,6 +64,8 @@ class SceneGraph:
         if vocabulary is not None:
             preds = getattr(vocabulary, "predicates", vocabulary)
             self.vocabulary = frozenset(preds)
+        #: whether evidence naming an unknown node creates it (else the update is rejected)
+        self.create_nodes: bool = bool(create_nodes)
         #: latest time step an operator processed on this graph
         self.clock: int = -1
         #: operator bookkeeping that must survive save/load (compaction epoch, ...)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Protocol
 
-from sgbelief.errors import UnknownPredicateError
+from sgbelief.errors import DuplicateEventError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion import queues
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, resolve_config
@@ -35,6 +35,30 @@ if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.graph.scene_graph import SceneGraph
 
 _NO_CLAIM = Verdict.NO_CLAIM
+
+
+def check_admissible(graph: SceneGraph, event: EvidenceEvent) -> None:
+    """Reject an event before it changes anything in ``graph``. It is inadmissible when
+
+    - its predicate is outside the graph's vocabulary (:class:`UnknownPredicateError`);
+    - the graph's provenance already holds an event with its id (:class:`DuplicateEventError`):
+      ids are unique within a graph, so that ``retract(id)`` names one event (checked against
+      the events with live entries; ids folded away by compaction are not remembered);
+    - a target node is not in the graph and the graph does not ``create_nodes``
+      (:class:`UnknownNodeError`: a mistyped id must not make a ghost node).
+
+    Every engine applies this rule to each event before its first change (the fused loops of
+    :mod:`sgbelief._fast` inline it).
+    """
+    vocab = graph.vocabulary
+    if vocab is not None and event.predicate not in vocab:
+        raise UnknownPredicateError(event.predicate, vocab)
+    if graph.provenance.has_event(event.id):
+        raise DuplicateEventError(event.id)
+    if not graph.create_nodes:
+        for node in event.targets:
+            if node not in graph.nx:
+                raise UnknownNodeError(node, event.id)
 
 
 class OperatorEngine(Protocol):
@@ -194,9 +218,7 @@ class BaseOperator:
         return self.engine.apply(self, graph, items, None)
 
     def _check(self, graph: SceneGraph, event: EvidenceEvent) -> None:
-        vocab = graph.vocabulary
-        if vocab is not None and event.predicate not in vocab:
-            raise UnknownPredicateError(event.predicate, vocab)
+        check_admissible(graph, event)
 
     def _verdict(self, label: str | None, predicate: str, c: float) -> Verdict:
         """compat(phi, label) with the sign rule (:func:`sgbelief.fusion.rules.verdict`)."""
