@@ -219,7 +219,13 @@ class ConformalSlice:
         set this slice would have produced), then alpha_t moves by :func:`adaptive_alpha`.
         """
         a = self.alpha_t
-        err = 1 if score > (self.threshold(a) if a > 0 else _INF) else 0
+        if a > 0:
+            if self.chunks:
+                self.merge()
+            q = conformal_quantile(self.srt, a)  # self.threshold(a), one call less per outcome
+        else:
+            q = _INF
+        err = 1 if score > q else 0
         self.n_seen += 1
         self.n_err += err
         self.alpha_t = adaptive_alpha(a, alpha, gamma, err)
