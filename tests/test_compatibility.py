@@ -88,3 +88,9 @@ def test_resolve_accepts_instance_path_or_shipped_name(table: SubsumptionTable) 
     assert SubsumptionTable.resolve(config_path("vocab", "scannet.yaml")).name == "scannet"
     with pytest.raises(FileNotFoundError):
         SubsumptionTable.resolve("no_such_vocabulary")
+
+
+def test_a_folder_named_like_a_shipped_table_does_not_hide_it(tmp_path, monkeypatch) -> None:
+    (tmp_path / "scannet").mkdir()  # e.g. a user's ScanNet data folder in the working directory
+    monkeypatch.chdir(tmp_path)
+    assert SubsumptionTable.resolve("scannet").name == "scannet"

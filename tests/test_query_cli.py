@@ -7,6 +7,7 @@ import pytest
 
 from sgbelief.cli import main
 from sgbelief import SceneGraph
+from sgbelief.query.engine import MissingGeometryWarning
 
 
 @pytest.fixture
@@ -107,3 +108,25 @@ def test_retrieval_cli_on_simulated_suite(tmp_path, capsys):
     assert rows["parked_car_near_crossing"]["f1"] == pytest.approx(1.0)
     assert rows["moving_car_in_traffic"]["positives"] == 1
     assert rows["car_at_intersection"]["positives"] == 1  # precomputed geometric value; d/1 undecidable
+
+
+def test_query_says_when_the_map_lacks_the_geometry_a_predicate_needs(tmp_path, capsys):
+    """A map saved without node geometry: the geometric predicate cannot hold anywhere, and the
+    query says so (one warning line) instead of silently returning nothing."""
+    g = SceneGraph()
+    g.add_node("c", label="chair")  # no bbox, no centroid
+    g.add_node("w", bbox=((1.6, -0.5, 0.9), (1.7, 1.0, 2.0)), label="window", scene="r")
+    g.provenance.record("c", "is_chair", "e1", 0, 3.0, 0.0)
+    g.save(tmp_path / "map")
+    assert main(["query", str(tmp_path / "map"), "is_chair & is_near_window"]) == 0
+    err = capsys.readouterr().err
+    assert "is_near_window: 1 of 1 candidate nodes lack the attribute(s) bbox|centroid" in err
+    assert len([line for line in err.splitlines() if "lack the attribute" in line]) == 1
+    with pytest.warns(MissingGeometryWarning, match="is_near_window"):
+        g.query("is_chair & is_near_window")
+    g.add_node("c", bbox=((0.3, 0.8, 0), (0.8, 1.3, 0.95)), label="chair", scene="r")
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MissingGeometryWarning)
+        assert [m.node for m in g.query("is_chair & is_near_window")] == ["c"]

@@ -193,11 +193,13 @@ class SubsumptionTable:
 
     @classmethod
     def resolve(cls, spec: SubsumptionTable | str | Path) -> SubsumptionTable:
-        """A table instance as is, a YAML path, or a shipped name (``scannet``, ``kitti360``)."""
+        """A table instance as is, a YAML path, or a shipped name (``scannet``, ``kitti360``).
+        A name is a file only when it ends in .yaml/.yml or names an existing file, so a folder
+        that happens to be called ``scannet`` in the working directory does not hide the shipped table."""
         if isinstance(spec, SubsumptionTable):
             return spec
         path = Path(spec)
-        if path.suffix in (".yaml", ".yml") or path.exists():
+        if path.suffix in (".yaml", ".yml") or path.is_file():
             return cls.from_yaml(path)
         return cls.shipped(str(spec))
 

@@ -23,6 +23,7 @@ once. Nothing is written to the graph.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,10 +33,29 @@ from sgbelief.query.language import Compound, Literal, QueryPredicateError, Quer
 from sgbelief.query.named import UnknownNamedQueryError, find_named_query, suggest_named_queries
 from sgbelief.query.relations import DEFAULT_REGISTRY, GeometryContext, RelationConfig, RelationRegistry
 
-__all__ = ["Component", "Match", "QueryResult", "QueryEngine", "run_query"]
+__all__ = ["Component", "Match", "MissingGeometryWarning", "QueryResult", "QueryEngine", "missing_attributes", "run_query"]
 
 BELIEF = "belief"
 GEOMETRIC = "geometric"
+
+
+class MissingGeometryWarning(UserWarning):
+    """A query's geometric predicate cannot be evaluated on some candidates: they lack the node
+    attributes it needs (a map saved without geometry), so it counts as false for them."""
+
+
+def missing_attributes(attrs: Mapping[str, Any], needs: Iterable[str]) -> list[str]:
+    """The needs of a geometric predicate that a node's attributes do not meet. A need is an
+    attribute name, alternatives joined by ``|``, ``name?`` (optional) or ``scene`` (the other
+    nodes of the map, not an attribute of this one)."""
+    out = []
+    for need in needs:
+        alternatives = need.split("|")
+        if need.endswith("?") or "scene" in alternatives:
+            continue
+        if not any(a in attrs for a in alternatives):
+            out.append(need)
+    return out
 
 
 @dataclass(frozen=True)
@@ -354,6 +374,7 @@ class QueryEngine:
         tau = self.tau if tau is None else tau
         compound, kinds = self.compile(expr)
         pool = self.candidates(compound, kinds, nodes)
+        self._warn_missing_geometry(compound, kinds, pool)
         matches = [m for m in self.score_many(pool, compound, kinds, prune=not include_all, tau=tau)
                    if include_all or m.retrieved]
         matches.sort(key=lambda m: (-m.probability, str(m.node)))
@@ -361,6 +382,23 @@ class QueryEngine:
         if limit is not None:
             matches = matches[:limit]
         return QueryResult(compound, tau, matches, len(pool), name=name, kinds=dict(kinds), total_retrieved=n_retrieved)
+
+    def _warn_missing_geometry(self, compound: Compound, kinds: Mapping[str, str], pool: Sequence[Any]) -> None:
+        """Say when a geometric predicate cannot hold on some candidates for want of geometry."""
+        node_attrs = self.graph.nx.nodes
+        for lit in compound.literals:
+            if kinds[lit.name] != GEOMETRIC:
+                continue
+            needs = self.registry.get(lit.name).needs
+            lacking = [missing_attributes(node_attrs[n], needs) for n in pool if n in node_attrs]
+            n_lacking = sum(1 for m in lacking if m)
+            if n_lacking:
+                wanted = sorted({need for m in lacking for need in m})
+                warnings.warn(MissingGeometryWarning(
+                    f"{lit.name}: {n_lacking} of {len(pool)} candidate nodes lack the attribute(s) "
+                    f"{', '.join(wanted)} it needs, so the query cannot retrieve them (was the map saved "
+                    "without node geometry? replay --save-graph keeps it when the log has a nodes.json)"),
+                    stacklevel=3)
 
     def evaluate_many(self, exprs: Mapping[str, str | Compound] | Iterable[str | Compound], **kw: Any) -> dict[str, QueryResult]:
         """Evaluate a batch sharing this engine's caches; keys are the names (or expressions)."""
