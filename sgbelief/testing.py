@@ -18,6 +18,10 @@ reference steps. ``random_stream`` is a seeded stream of events for tests,
 ``check_store_matches_reference(make_store, operations)`` does the same for a provenance store:
 a store that builds its entries differently (a journal, deferred loading) must be observably the
 reference :class:`~sgbelief.graph.provenance.ProvenanceStore` under any sequence of calls.
+
+``check_isotonic_matches_reference(outcomes, fast)`` does the same for a calibration slice's
+isotonic store (:class:`~sgbelief.calibration.isotonic.IsotonicStore`): the incremental merge of
+:mod:`sgbelief._fast.isotonic` must hold and fit what the reference refit does, knot for knot.
 """
 
 from __future__ import annotations
@@ -26,12 +30,14 @@ import copy
 import math
 import random
 import tempfile
-from collections.abc import Callable, Sequence
+from array import array
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from sgbelief._fast.batched import EventColumns, batched_replay
 from sgbelief._fast.signature import float_bits, provenance_signature
 from sgbelief.api.operators import make_operator
+from sgbelief.calibration.isotonic import IsotonicStoreFactory, RefitIsotonic, interpolate
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.events import EvidenceEvent
@@ -197,6 +203,8 @@ def check_fast_matches_reference(
         for key, sl in cal_ref.slices.items():
             other = cal_fast.slices[key]
             assert list(sl.fc) == list(other.fc) and list(sl.fy) == list(other.fy), key
+            # the reference engine refits scikit-learn, the fused one merges incrementally: same knots
+            assert (sl.n_fit, sl.kx, sl.ky, sl.base_rate) == (other.n_fit, other.kx, other.ky, other.base_rate), key
     assert sorted(g_ref.nx.nodes, key=str) == sorted(g_fast.nx.nodes, key=str)
 
 
@@ -329,9 +337,58 @@ def check_store_matches_reference(
     assert store_state(ref) == store_state(other), "the stores differ at the end"
 
 
+
+
+def check_isotonic_matches_reference(
+    outcomes: Sequence[tuple[float, int]],
+    fast: IsotonicStoreFactory,
+    reference: IsotonicStoreFactory = RefitIsotonic,
+    *,
+    capacity: int | None = None,
+    batch_sizes: Iterable[int] = (1,),
+    atol: float = 0.0,
+) -> None:
+    """Raise AssertionError unless the isotonic store ``fast`` holds and fits what ``reference``
+    does after every batch of ``outcomes`` (pairs (c, y), merged in batches of the sizes
+    ``batch_sizes``, cycled): the same outcomes held (count, positives, arrival order, sorted per
+    label) and the same knots of p_hat.
+
+    ``atol`` bounds the difference of the fitted values. Isotonic values are means of pooled
+    blocks, so an implementation that sums a block in another order than the reference may differ
+    in the last bits (relative error of order n 2^-53 for a block of n points), and the knots it
+    keeps can then differ too; with ``atol > 0`` the two fits are compared as functions p_hat at
+    every held confidence and knot. With ``atol = 0`` (the default) the knots must be equal, ``==``:
+    what :mod:`sgbelief._fast.isotonic` guarantees, its pool-adjacent-violators running the
+    reference's floating-point operations in the reference's order.
+    """
+    stores = fast(capacity), reference(capacity)
+    sizes = list(batch_sizes) or [1]
+    i = k = 0
+    while i < len(outcomes):
+        batch = outcomes[i : i + max(1, sizes[k % len(sizes)])]
+        i += len(batch)
+        k += 1
+        for st in stores:
+            st.merge(array("d", [c for c, _ in batch]), array("b", [1 if y else 0 for _, y in batch]))
+        got, want = stores[0], stores[1]
+        assert (got.n, got.n_pos) == (want.n, want.n_pos), (i, got.n, got.n_pos, want.n, want.n_pos)
+        wc, wy = want.window()
+        gc, gy = got.window()
+        assert list(gc) == list(wc) and list(gy) == list(wy), f"held outcomes differ after {i} outcomes"
+        for label in (0, 1):
+            assert list(got.sorted_by_label(label)) == list(want.sorted_by_label(label)), (i, label)
+        (fx, fy), (rx, ry) = got.knots(), want.knots()
+        if atol == 0.0:
+            assert (list(fx), list(fy)) == (list(rx), list(ry)), f"knots differ after {i} outcomes"
+        elif rx:
+            for c in [*wc, *rx, *fx]:
+                assert abs(interpolate(fx, fy, c) - interpolate(rx, ry, c)) <= atol, (i, c)
+
+
 __all__ = [
     "check_fast_matches_reference",
     "check_fusion_operator",
+    "check_isotonic_matches_reference",
     "check_store_matches_reference",
     "apply_store_operations",
     "store_state",

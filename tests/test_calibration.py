@@ -1,4 +1,9 @@
-"""Mondrian isotonic calibration: equals scikit-learn, amortised refits, LR of Eq. 2, shrinkage, cold start."""
+"""Mondrian isotonic calibration: equals scikit-learn, amortised refits, LR of Eq. 2, shrinkage, cold start.
+
+Calibrator-level tests run with both isotonic stores: the reference refit (the default) and the
+fast incremental merge the fast engine injects (``STORES``). The fast store's own paths are tested
+in tests/test_fast_isotonic.py.
+"""
 
 from __future__ import annotations
 
@@ -10,9 +15,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from sklearn.isotonic import IsotonicRegression
 
-from sgbelief.fusion.calibration import CalibrationSlice, MondrianCalibrator
-from sgbelief.fusion.config import CalibrationConfig
-from sgbelief.fusion.conformal import nonconformity
+from sgbelief._fast.isotonic import IncrementalIsotonic
+from sgbelief.calibration.config import CalibrationConfig
+from sgbelief.calibration.conformal import nonconformity
+from sgbelief.calibration.isotonic import RefitIsotonic
+from sgbelief.calibration.mondrian import (
+    DEFAULT_GROUPS,
+    MondrianCalibrator,
+    by_context_and_predicate,
+    by_predicate,
+    cold_start_log_lr,
+)
+from sgbelief.calibration.slice import CalibrationSlice
+
+STORES = pytest.mark.parametrize("store", [RefitIsotonic, IncrementalIsotonic], ids=["reference", "fast"])
 
 
 def _data(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -22,9 +38,10 @@ def _data(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return c, y
 
 
-def test_isotonic_fit_equals_scikit_learn() -> None:
+@STORES
+def test_isotonic_fit_equals_scikit_learn(store) -> None:
     c, y = _data(700)
-    cal = MondrianCalibrator()
+    cal = MondrianCalibrator(isotonic=store)
     for ci, yi in zip(c, y):
         cal.add("vlm", "is_chair", float(ci), int(yi))
     cal.refit_all()
@@ -50,9 +67,10 @@ def test_refits_are_amortised() -> None:
     assert s.n - s.n_fit <= max(cfg.min_refit, cfg.refit_growth * s.n_fit)
 
 
+@STORES
 @pytest.mark.parametrize("reference", ["slice", "uniform"])
-def test_likelihood_ratio_is_eq2_and_always_finite_positive(reference: str) -> None:
-    cal = MondrianCalibrator(CalibrationConfig(target_size=10, lr_reference=reference))
+def test_likelihood_ratio_is_eq2_and_always_finite_positive(reference: str, store) -> None:
+    cal = MondrianCalibrator(CalibrationConfig(target_size=10, lr_reference=reference), isotonic=store)
     c, y = _data(400, seed=2)
     for ci, yi in zip(c, y):
         cal.add("k", "p", float(ci), int(yi))
@@ -129,12 +147,13 @@ def test_lr_reference_uniform_keeps_the_calibrated_posterior_odds() -> None:
     assert uniform.likelihood_ratio(0.8, "k", "p")[0] == pytest.approx(p / (1 - p))
 
 
-def test_sliding_window_equals_a_fresh_fit_on_the_last_outcomes() -> None:
+@STORES
+def test_sliding_window_equals_a_fresh_fit_on_the_last_outcomes(store) -> None:
     """With buffer_size = W, after every refit the slice holds exactly the last W outcomes:
     same knots, base rate and conformal scores as an unbounded slice fitted on that tail."""
     c, y = _data(3000, seed=4)
     w = 500
-    s = CalibrationSlice(alpha=0.1, capacity=w)
+    s = CalibrationSlice(alpha=0.1, capacity=w, isotonic=store)
     cfg = CalibrationConfig()
     checked = 0
     for i, (ci, yi) in enumerate(zip(c, y)):
@@ -142,7 +161,7 @@ def test_sliding_window_equals_a_fresh_fit_on_the_last_outcomes() -> None:
         if s.n - s.n_fit >= max(cfg.min_refit, cfg.refit_growth * s.n_fit) or s.n_fit == 0:
             s.refit()
             tail_c, tail_y = c[max(0, i + 1 - w) : i + 1], y[max(0, i + 1 - w) : i + 1]
-            ref = CalibrationSlice(alpha=0.1)
+            ref = CalibrationSlice(alpha=0.1, isotonic=store)
             for cj, yj in zip(tail_c, tail_y):
                 ref.add(float(cj), int(yj))
             ref.refit()
@@ -154,8 +173,9 @@ def test_sliding_window_equals_a_fresh_fit_on_the_last_outcomes() -> None:
     assert checked > 20
 
 
-def test_calibrator_buffer_is_bounded_by_buffer_size() -> None:
-    cal = MondrianCalibrator(CalibrationConfig(buffer_size=256))
+@STORES
+def test_calibrator_buffer_is_bounded_by_buffer_size(store) -> None:
+    cal = MondrianCalibrator(CalibrationConfig(buffer_size=256), isotonic=store)
     c, y = _data(5000, seed=5)
     for ci, yi in zip(c, y):
         cal.add("k", "p", float(ci), int(yi))
@@ -172,7 +192,7 @@ def test_calibrator_buffer_is_bounded_by_buffer_size() -> None:
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.integers(0, 20), min_size=1, max_size=60), st.data())
 def test_remove_sorted_removes_one_occurrence_each(values: list[int], data: st.DataObject) -> None:
-    from sgbelief.fusion.conformal import remove_sorted
+    from sgbelief.calibration.conformal import remove_sorted
 
     base = np.sort(np.array(values, dtype=np.float64) / 4)
     k = data.draw(st.integers(0, len(values)))
@@ -185,96 +205,25 @@ def test_remove_sorted_removes_one_occurrence_each(values: list[int], data: st.D
         remove_sorted(base, np.array([99.0]))
 
 
-# ---------------------------------------------------------------------------------------------
-# fast paths: the distinct-confidence fit, the small (Python list) path, lazy fits, the reference
-
-
 def _sklearn_knots(c: np.ndarray, y: np.ndarray) -> tuple[list[float], list[float]]:
     ref = IsotonicRegression(y_min=0.0, y_max=1.0, out_of_bounds="clip").fit(c, y)
     return ref.X_thresholds_.tolist(), ref.y_thresholds_.tolist()
 
 
-def _odd_confidences(rng: np.random.Generator, n: int, kind: int) -> np.ndarray:
-    if kind == 0:  # continuous
-        return rng.random(n)
-    if kind == 1:  # heavily tied (quantised)
-        return np.round(rng.random(n), int(rng.integers(1, 4)))
-    if kind == 2:  # chains of near-ties (< 1e-15 apart): scikit-learn's own pooling rule applies
-        return rng.choice([0.25, 0.5, 0.75], n) + rng.integers(0, 8, n) * 3e-16
-    return rng.choice([0.0, 1.0, 0.5, 1e-300, 1 - 2**-53], n)  # extremes
-
-
-@pytest.mark.parametrize("small", [True, False])
-def test_fit_is_bit_identical_to_scikit_learn_on_both_paths(small: bool, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Knots == IsotonicRegression's X_thresholds_ / y_thresholds_ exactly (==, not isclose), on the
-    Python-list path (small slices) and the numpy distinct-confidence path."""
-    from sgbelief.fusion import calibration, conformal
-
-    monkeypatch.setattr(calibration, "SMALL", 10**9 if small else 0)
-    monkeypatch.setattr(conformal, "SMALL", 10**9 if small else 0)
-    rng = np.random.default_rng(11)
-    for trial in range(120):
-        n = int(rng.integers(1, 300))
-        c = _odd_confidences(rng, n, trial % 4)
-        y = (rng.random(n) < np.clip(c, 0, 1)).astype(int)
-        s = CalibrationSlice(alpha=0.1)
-        for ci, yi in zip(c.tolist(), y.tolist()):
-            s.add(ci, yi)
-        s.refit()
-        assert (s.kx, s.ky) == _sklearn_knots(c, y)
-        assert type(s.ux) is (list if small else np.ndarray)
-        np.testing.assert_array_equal(s.sx0, np.sort(c[y == 0]))
-        np.testing.assert_array_equal(s.sx1, np.sort(c[y == 1]))
-        assert s.n == s.n_fit == n and s.n_pos == y.sum() and s.base_rate == y.sum() / n
-
-
-@pytest.mark.parametrize("capacity", [None, 16, 50, 300])
-def test_small_and_numpy_paths_and_lazy_fits_agree(capacity: int | None, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The same stream through the Python-list path, the numpy path and the crossing between them,
-    read after every refit or only at the end (lazy fits merging many batches), gives the same
-    knots, base rate, sorted outcomes, window and conformal scores, also across sliding-window
-    evictions (and batches that alone overflow the window)."""
-    from sgbelief.fusion import calibration, conformal
-
-    rng = np.random.default_rng(12)
-    n = 1500
-    c = np.round(rng.beta(2, 2, n), 3)
-    y = (rng.random(n) < c).astype(int)
-
-    def run(small: int, read_every: bool, min_refit: int) -> list:
-        monkeypatch.setattr(calibration, "SMALL", small)
-        monkeypatch.setattr(conformal, "SMALL", small)
-        s = CalibrationSlice(alpha=0.1, capacity=capacity, min_refit=min_refit)
-        states = []
-        for i, (ci, yi) in enumerate(zip(c.tolist(), y.tolist())):
-            s.add(ci, yi)
-            if s.n - s.n_fit >= s.refit_gap:
-                s.refit()
-                if read_every or i > n - 40:
-                    states.append((s.kx, s.ky, s.base_rate, s.log_prior_odds, s.n, s.n_pos, s.n_seen,
-                                   s.sx0.tolist(), s.sx1.tolist(), list(s.fc), list(s.fy), list(s.conformal.sorted)))
-        return states
-
-    ref = run(0, True, 8)
-    assert run(10**9, True, 8) == ref  # Python lists throughout
-    assert run(128, True, 8) == ref  # lists, then numpy
-    lazy = run(0, False, 8)
-    assert lazy == ref[len(ref) - len(lazy):]
-
-
+@STORES
 @pytest.mark.parametrize("capacity", [16, 50, 300])
-def test_batches_larger_than_the_window_equal_a_fresh_fit_on_the_tail(capacity: int) -> None:
+def test_batches_larger_than_the_window_equal_a_fresh_fit_on_the_tail(capacity: int, store) -> None:
     """Refits committing batches larger than the window, read only at the end (the older batches
     are dropped unmerged): same as a fresh fit on the last ``capacity`` outcomes."""
     c, y = _data(2000, seed=13)
     c = np.round(c, 3)
-    s = CalibrationSlice(alpha=0.1, capacity=capacity, min_refit=3 * capacity + 1)
+    s = CalibrationSlice(alpha=0.1, capacity=capacity, min_refit=3 * capacity + 1, isotonic=store)
     for ci, yi in zip(c.tolist(), y.tolist()):
         s.add(ci, yi)
         if s.n - s.n_fit >= s.refit_gap:
             s.refit()
     s.refit()
-    fresh = CalibrationSlice(alpha=0.1)
+    fresh = CalibrationSlice(alpha=0.1, isotonic=store)
     for ci, yi in zip(c[-capacity:].tolist(), y[-capacity:].tolist()):
         fresh.add(ci, yi)
     fresh.refit()
@@ -299,8 +248,6 @@ class _ReferenceCalibrator:
         return self.levels.setdefault(key, {"out": [], "n_fit": 0, "kx": [], "ky": [], "lpo": 0.0, "scores": [], "alpha_t": self.alpha})
 
     def _refit(self, lv: dict) -> None:
-        from sgbelief.fusion.conformal import nonconformity
-
         cap = self.cfg.buffer_size
         win = lv["out"][-cap:] if cap is not None else lv["out"]
         c = np.array([o[0] for o in win])
@@ -314,7 +261,7 @@ class _ReferenceCalibrator:
         lv["scores"] = sorted(nonconformity(ci, yi) for ci, yi in win)
 
     def add(self, k: str, p: str, c: float, y: int) -> None:
-        from sgbelief.fusion.conformal import conformal_quantile, nonconformity
+        from sgbelief.calibration.conformal import conformal_quantile
 
         levels = [self._level(key) for key in ((k, p), ("*", p), ("*", "*"))]
         first = levels[0]
@@ -380,6 +327,7 @@ class _ReferenceCalibrator:
 
 @settings(max_examples=25, deadline=None)
 @given(
+    st.sampled_from([RefitIsotonic, IncrementalIsotonic]),
     st.sampled_from([None, 16, 40, 200]),
     st.sampled_from(["slice", "uniform"]),
     st.sampled_from(["raw", "neutral"]),
@@ -388,7 +336,7 @@ class _ReferenceCalibrator:
     st.integers(0, 2**32 - 1),
     st.sampled_from(["slice", "pooled"]),
 )
-def test_calibrator_equals_the_reference_exactly(buffer_size, lr_reference, cold_start, min_refit, growth, seed,
+def test_calibrator_equals_the_reference_exactly(store, buffer_size, lr_reference, cold_start, min_refit, growth, seed,
                                                  kappa_pooling) -> None:
     """Every Lambda_hat / kappa_hat, alpha_t, threshold and counter equals (==) the slow reference
     (scikit-learn refit on the window at the same schedule), for several contexts including "*"."""
@@ -396,7 +344,7 @@ def test_calibrator_equals_the_reference_exactly(buffer_size, lr_reference, cold
                             min_refit=min_refit, refit_growth=growth, target_size=30, adaptive_gamma=0.05,
                             kappa_pooling=kappa_pooling)
     rng = np.random.default_rng(seed)
-    cal, ref = MondrianCalibrator(cfg, alpha=0.2), _ReferenceCalibrator(cfg, 0.2)
+    cal, ref = MondrianCalibrator(cfg, alpha=0.2, isotonic=store), _ReferenceCalibrator(cfg, 0.2)
     quant = int(rng.integers(1, 7))
     for t in range(400):
         k, p = ["a", "b", "*"][int(rng.integers(0, 3))], ["p", "q"][int(rng.integers(0, 2))]
@@ -438,14 +386,15 @@ def test_counters_and_pending_views() -> None:
         CalibrationSlice(alpha=0.1).refit()
 
 
-def test_pickled_calibrator_continues_identically() -> None:
+@STORES
+def test_pickled_calibrator_continues_identically(store) -> None:
     """A calibrator copied mid-stream (pickle, deepcopy) with pending outcomes and unmerged
     batches gives the same results as the original from there on."""
     import copy
     import pickle
 
     cfg = CalibrationConfig(buffer_size=64, target_size=40)
-    cal = MondrianCalibrator(cfg, alpha=0.1)
+    cal = MondrianCalibrator(cfg, alpha=0.1, isotonic=store)
     rng = np.random.default_rng(14)
     stream = [(["a", "b"][int(rng.integers(0, 2))], ["p", "q"][int(rng.integers(0, 2))], round(float(rng.random()), 3)) for _ in range(900)]
     for k, p, c in stream[:450]:
@@ -459,22 +408,112 @@ def test_pickled_calibrator_continues_identically() -> None:
     assert cal.summary() == clones[0].summary() == clones[1].summary()
 
 
-@pytest.mark.parametrize("n", [20, 400])
-def test_nan_confidences_fit_as_before(n: int) -> None:
-    """NaN confidences (sorted last, pooled into the last point by ``_make_unique``) give the knots
-    of ``_isotonic_knots`` on the sorted outcomes (NaN always takes the numpy path)."""
-    from sgbelief.fusion.calibration import _isotonic_knots
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_non_finite_confidences_are_rejected_and_change_nothing(bad: float) -> None:
+    """No isotonic fit is defined on NaN or infinite confidences (scikit-learn refuses them): the
+    calibrator raises at once, naming the slice, and holds what it held before."""
+    cal = MondrianCalibrator(CalibrationConfig(target_size=5))
+    for i in range(20):
+        cal.add("k", "p", i / 20, i % 2)
+    before = cal.summary()
+    with pytest.raises(ValueError, match="'k'/'p': confidence must be finite"):
+        cal.add("k", "p", bad, 1)
+    assert cal.summary() == before
 
-    rng = np.random.default_rng(15)
-    c = np.round(rng.random(n), 2)
-    c[rng.random(n) < 0.1] = np.nan
-    y = (rng.random(n) < 0.5).astype(int)
-    s = CalibrationSlice(alpha=0.1)
-    for ci, yi in zip(c.tolist(), y.tolist()):
-        s.add(ci, yi)
-    s.refit()
-    x = np.concatenate((np.sort(c[y == 0]), np.sort(c[y == 1])))
-    order = np.argsort(x, kind="stable")
-    kx, ky = _isotonic_knots(x[order], np.concatenate((np.zeros((y == 0).sum()), np.ones((y == 1).sum())))[order])
-    assert np.array_equal(s.kx, kx, equal_nan=True) and np.array_equal(s.ky, ky, equal_nan=True)
-    assert s.n == n and len(s.sx0) + len(s.sx1) == n
+
+# ---------------------------------------------------------------------------------------------
+# the Mondrian grouping: groups= (crepes' bins=, MAPIE's groups=)
+
+
+@STORES
+def test_default_groups_are_the_paper_hierarchy(store) -> None:
+    rng = np.random.default_rng(21)
+    a, b = MondrianCalibrator(isotonic=store), MondrianCalibrator(groups=DEFAULT_GROUPS, isotonic=store)
+    for _ in range(300):
+        k, p, c = ["x", "y", "*"][int(rng.integers(0, 3))], ["p", "q"][int(rng.integers(0, 2))], round(float(rng.random()), 2)
+        y = int(rng.random() < c)
+        a.add(k, p, c, y)
+        b.add(k, p, c, y)
+        assert a.likelihood_ratio(c, k, p) == b.likelihood_ratio(c, k, p)
+    assert a.summary() == b.summary()
+    assert set(a.slices) == {("x", "p"), ("x", "q"), ("y", "p"), ("y", "q"), ("*", "p"), ("*", "q"), ("*", "*")}
+
+
+@STORES
+@pytest.mark.parametrize("kappa_pooling", ["slice", "pooled"])
+def test_a_two_level_grouping_shrinks_toward_its_own_pool_then_the_cold_start(store, kappa_pooling: str) -> None:
+    """groups=(per (context, predicate), per predicate): no global pool, so a predicate with no
+    outcome yet gets the cold-start rule even when another predicate is well calibrated, and a
+    sparse slice shrinks toward its predicate pool, which shrinks toward the cold-start rule."""
+    cfg = CalibrationConfig(target_size=40, kappa_pooling=kappa_pooling)
+    cal = MondrianCalibrator(cfg, groups=(by_context_and_predicate, by_predicate), isotonic=store)
+    rng = np.random.default_rng(22)
+    for _ in range(200):
+        c = float(rng.random())
+        cal.add("big", "is_car", c, int(rng.random() < c))
+    for c, y in [(0.9, 0), (0.8, 0), (0.3, 1)]:
+        cal.add("small", "is_chair", c, y)
+    assert set(cal.slices) == {("big", "is_car"), ("*", "is_car"), ("small", "is_chair"), ("*", "is_chair")}
+    m = math.log(cfg.lr_max)
+    # an unseen predicate: the cold-start rule at kappa_min (the global level of the default would answer)
+    assert cal.likelihood_ratio(0.8, "big", "is_table") == (math.exp(cold_start_log_lr(0.8, "raw", m)), cfg.kappa_min)
+    assert MondrianCalibrator(cfg).likelihood_ratio(0.8, "big", "is_table")[1] == cfg.kappa_min
+    # the sparse slice: l_s log L_s + (1 - l_s) [l_p log L_p + (1 - l_p) log L_cold]
+    s, p = cal.slices[("small", "is_chair")], cal.slices[("*", "is_chair")]
+    ls, lp = s.n_fit / 40, p.n_fit / 40
+    inner = lp * p.log_lr(0.85, False) + (1 - lp) * cold_start_log_lr(0.85, "raw", m)
+    lam, kappa = cal.likelihood_ratio(0.85, "small", "is_chair")
+    assert lam == pytest.approx(math.exp(ls * s.log_lr(0.85, False) + (1 - ls) * inner), rel=1e-12)
+    assert kappa == pytest.approx(max(ls if kappa_pooling == "slice" else ls + (1 - ls) * lp, cfg.kappa_min))
+    # a full-weight slice answers alone
+    big = cal.slices[("big", "is_car")]
+    assert cal.likelihood_ratio(0.7, "big", "is_car") == (pytest.approx(math.exp(big.log_lr(0.7, False))), 1.0)
+    assert cal.in_regime("small", "is_chair") and not cal.in_regime("small", "is_car")
+    assert cal.n_outcomes("*", "is_car") == 200 and cal.prediction_set(0.7, "small", "is_chair").claims_coverage
+
+
+def test_a_custom_grouping_by_predicate_family() -> None:
+    """Any key function works: here predicates pooled by family before the global pool, and the
+    pool keys are the calibrator's slice keys."""
+    family = {"is_car": "vehicle", "is_truck": "vehicle", "is_person": "agent"}
+
+    def by_family(context: str, predicate: str) -> tuple[str, str]:
+        return ("family", family[predicate])
+
+    cal = MondrianCalibrator(CalibrationConfig(target_size=30), groups=(by_context_and_predicate, by_family, DEFAULT_GROUPS[-1]))
+    rng = np.random.default_rng(23)
+    for _ in range(120):
+        c = float(rng.random())
+        cal.add("vlm", "is_car", c, int(rng.random() < c))
+    cal.add("vlm", "is_truck", 0.6, 1)
+    assert cal.slices[("family", "vehicle")].n == 121 and ("family", "agent") not in cal.slices
+    truck = cal.likelihood_ratio(0.9, "vlm", "is_truck")
+    person = cal.likelihood_ratio(0.9, "vlm", "is_person")
+    assert truck != person  # the truck borrows the vehicle pool's fit, the person only the global one
+    assert "family|vehicle" in cal.summary()
+    with pytest.raises(ValueError, match="at least one Mondrian level"):
+        MondrianCalibrator(groups=())
+
+
+def test_the_old_modules_re_export_with_a_deprecation_warning() -> None:
+    import importlib
+
+    from sgbelief.calibration import conformal, isotonic, mondrian, slice
+    from sgbelief.fusion import rules
+
+    old_cal = importlib.import_module("sgbelief.fusion.calibration")
+    old_conf = importlib.import_module("sgbelief.fusion.conformal")
+    for module, name, new in [
+        (old_cal, "MondrianCalibrator", mondrian.MondrianCalibrator),
+        (old_cal, "CalibrationSlice", slice.CalibrationSlice),
+        (old_cal, "calibrated_log_lr", isotonic.calibrated_log_lr),
+        (old_cal, "CalibrationConfig", CalibrationConfig),
+        (old_cal, "ConformalSlice", conformal.ConformalSlice),
+        (old_conf, "nonconformity", conformal.nonconformity),
+        (old_conf, "ConformalSlice", conformal.ConformalSlice),
+    ]:
+        with pytest.warns(DeprecationWarning, match=f"import {name} from sgbelief.calibration"):
+            assert getattr(module, name) is new
+    with pytest.raises(AttributeError):
+        old_cal.no_such_name  # noqa: B018
+    assert rules.calibrated_log_lr is isotonic.calibrated_log_lr  # Eq. 2 keeps its old import path, silently

@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sgbelief.fusion.calibration import MondrianCalibrator
-from sgbelief.fusion.config import CalibrationConfig
-from sgbelief.fusion.conformal import conformal_quantile, nonconformity, prediction_set
+from sgbelief.calibration.mondrian import MondrianCalibrator
+from sgbelief.calibration.config import CalibrationConfig
+from sgbelief.calibration.conformal import conformal_quantile, nonconformity, prediction_set
 
 ALPHA = 0.1
 
@@ -105,8 +105,8 @@ def test_add_score_equals_pending_plus_refresh_rule(capacity: int | None, small:
     refresh once the pending ones reach max(min_refit, growth * n_sorted) (the operator's old
     pair-score path); the sorted view is the last ``capacity`` committed scores, ascending, read
     after every refresh or only now and then (lazy merges), on the list and numpy paths."""
-    from sgbelief.fusion import conformal
-    from sgbelief.fusion.conformal import ConformalSlice
+    from sgbelief.calibration import conformal
+    from sgbelief.calibration.conformal import ConformalSlice
 
     monkeypatch.setattr(conformal, "SMALL", small)
     rng = np.random.default_rng(21)
@@ -138,7 +138,7 @@ def test_add_score_equals_pending_plus_refresh_rule(capacity: int | None, small:
 
 
 def test_batches_beyond_capacity_are_dropped_unmerged() -> None:
-    from sgbelief.fusion.conformal import ConformalSlice
+    from sgbelief.calibration.conformal import ConformalSlice
 
     sl = ConformalSlice(ALPHA, capacity=20)
     scores = [float(i % 13) / 7 for i in range(200)]
@@ -158,7 +158,7 @@ def test_batches_beyond_capacity_are_dropped_unmerged() -> None:
 def test_merge_sorted_is_bitwise_the_stable_merge(base: list[float], new: list[float]) -> None:
     """merge_sorted == np.insert of the stably sorted new values after equal base values, bit for
     bit (signed zeros and NaN included), with and without a payload."""
-    from sgbelief.fusion.conformal import merge_sorted
+    from sgbelief.calibration.conformal import merge_sorted
 
     b = np.sort(np.array(base, dtype=np.float64), kind="stable")
     nw = np.array(new, dtype=np.float64)

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from sgbelief.eval.random_stream import random_records
 from sgbelief.eval.replay import make_runs, to_event
-from sgbelief.fusion.calibration import MondrianCalibrator
+from sgbelief.calibration.mondrian import MondrianCalibrator
 
 
 def test_provenance_live_entries_bounded_by_compaction_horizon() -> None:

@@ -15,11 +15,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from sgbelief._fast.isotonic import IncrementalIsotonic
+from sgbelief.calibration.conformal import ConformalSlice
 from sgbelief.errors import DuplicateEventError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion import queues
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import Verdict
-from sgbelief.fusion.conformal import ConformalSlice
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.rules import kl_upper_bound, revision_kl_exceeds
 from sgbelief.graph.provenance import EntryStatus, EntryVerdict
@@ -47,6 +48,8 @@ class FusedCalibratedEngine:
     """The fused loop as an :class:`~sgbelief.fusion.operators.base.OperatorEngine` of the calibrated family."""
 
     name = "fast"
+    #: the calibrator's isotonic store under this engine: the incremental merge (same knots as the reference refit)
+    isotonic = IncrementalIsotonic
 
     def apply(self, op: CalibratedOperator, graph: SceneGraph, items: Items,
               reports: list[UpdateReport] | None) -> list[QueueResolution]:

@@ -33,7 +33,7 @@ from sgbelief.api.operators import make_operator
 from sgbelief.eval.formats import EventRecord
 from sgbelief.eval.metrics import conformal_coverage, reliability_bins
 from sgbelief.eval.replay import OperatorRun, OperatorScores, make_runs, replay, score_run, to_event
-from sgbelief.fusion.calibration import MondrianCalibrator
+from sgbelief.calibration.mondrian import MondrianCalibrator
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES

@@ -200,9 +200,9 @@ def expected_calibration_error(confidences: ArrayLike, outcomes: ArrayLike, n_bi
 def conformal_quantile(scores: ArrayLike, alpha: float) -> float:
     """Split-conformal threshold: the ceil((n+1)(1-alpha))-th smallest score (inf if that exceeds n).
 
-    Same rule as the operators use (:func:`sgbelief.fusion.conformal.conformal_quantile`).
+    Same rule as the operators use (:func:`sgbelief.calibration.conformal.conformal_quantile`).
     """
-    from sgbelief.fusion.conformal import conformal_quantile as _quantile
+    from sgbelief.calibration.conformal import conformal_quantile as _quantile
 
     return _quantile(np.sort(np.asarray(scores, dtype=float).ravel()), alpha)
 

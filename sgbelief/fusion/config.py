@@ -1,4 +1,8 @@
-"""Operator hyperparameters (Table 1) as a validated, immutable pydantic model."""
+"""Operator hyperparameters (Table 1) as a validated, immutable pydantic model.
+
+The calibration section, :class:`~sgbelief.calibration.config.CalibrationConfig`, lives with the
+calibrator in :mod:`sgbelief.calibration`; it is re-exported here.
+"""
 
 from __future__ import annotations
 
@@ -8,45 +12,13 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from sgbelief.calibration.config import CalibrationConfig  # re-exported: its home is the calibration package
 from sgbelief.errors import ConfigError, FormatError
 
 
 class _Frozen(BaseModel):
     # every float must be finite: ``w0: .inf`` or ``alpha: .nan`` is rejected here, at the boundary
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-class CalibrationConfig(_Frozen):
-    """Knobs of the Mondrian isotonic calibrator and the conformal sets (§4.1)."""
-
-    target_size: int = Field(50, ge=1, description="kappa_hat = min(1, effective size / target_size)")
-    kappa_min: float = Field(0.05, gt=0.0, le=1.0, description="floor of kappa_hat")
-    lr_max: float = Field(1000.0, gt=1.0, description="Lambda_hat clipped to [1/lr_max, lr_max]")
-    refit_growth: float = Field(0.1, gt=0.0, description="refit after the slice grew by this fraction")
-    min_refit: int = Field(8, ge=1, description="... or by at least this many outcomes")
-    cold_start: Literal["raw", "neutral"] = "raw"
-    lr_reference: Literal["slice", "uniform"] = Field(
-        "uniform",
-        description="odds Lambda_hat is measured against: the uniform prior Beta(1, 1) (default, docs/method.md) "
-        "or the slice's base rate among claims (the paper's reading)",
-    )
-    kappa_pooling: Literal["slice", "pooled"] = Field(
-        "slice",
-        description="kappa_hat from the (context, predicate) slice's size alone (paper) or from the pooled "
-        "levels the shrunk estimate actually uses",
-    )
-    support_strata: int = Field(
-        4,
-        ge=1,
-        description="Mondrian strata by the number of earlier claims at (v, phi): 0, 1, ..., S-1 or more "
-        "(1: no stratification, the paper's taxonomy)",
-    )
-    adaptive_gamma: float = Field(0.005, ge=0.0, lt=1.0, description="adaptive conformal step size")
-    buffer_size: int | None = Field(
-        262_144,
-        ge=16,
-        description="most recent verification outcomes kept per Mondrian slice (sliding window); null keeps all",
-    )
 
 
 class OverwriteConfig(_Frozen):

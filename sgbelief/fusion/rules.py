@@ -9,7 +9,7 @@ step                        function
 sign of the claim           :func:`claim_asserts`
 verdict (compat)            :func:`verdict`
 support stratum             :func:`support_stratum`
-calibrated LR (Eq. 2)       :func:`calibrated_log_lr` (used by the calibration slices)
+calibrated LR (Eq. 2)       :func:`calibrated_log_lr` (of :mod:`sgbelief.calibration.isotonic`)
 weight w = w0 kappa T(v)    :func:`evidence_weight`
 increments (Eq. 4)          :func:`claim_increments`
 Eq. 4 inverted (Λ̂, w)      :func:`claim_lambda_hat`, :func:`claim_weight`
@@ -24,6 +24,7 @@ import math
 
 from scipy import special as _sp
 
+from sgbelief.calibration.isotonic import calibrated_log_lr  # Eq. 2 lives with the calibrator; re-exported
 from sgbelief.fusion.compatibility import Verdict
 # Eq. 4 inverted: defined with the provenance log, which reads its entries' Lambda-hat back (the
 # model layer cannot import this one); exported here, next to the equation they invert
@@ -106,26 +107,6 @@ def stratified_context(context: str, stratum: int, n_strata: int) -> str:
     """The calibration context key of a claim: ``context`` itself when there is one stratum, else
     ``"<context>|s<stratum>"`` (the Mondrian cell (context, stratum) for each predicate)."""
     return context if n_strata <= 1 else f"{context}|s{stratum}"
-
-
-def calibrated_log_lr(p_hat: float, eps: float, log_reference_odds: float) -> float:
-    """log Lambda_hat of Eq. 2 from the isotonic calibrated probability p_hat = p(y = 1 | c).
-
-    By Bayes' rule p(c | y=1) / p(c | y=0) = odds(p_hat) / odds(pi), where pi is the probability of
-    y = 1 before the claim's confidence is seen. p_hat is clipped to [eps, 1 - eps] so the ratio
-    stays finite::
-
-        log Lambda_hat = log(p_hat / (1 - p_hat)) - log_reference_odds
-
-    ``log_reference_odds`` is log(pi / (1 - pi)): the slice's base rate among claims (the paper's
-    reading, ``lr_reference: slice``) or 0, the odds of the Beta(1, 1) prior (``uniform``, the
-    default; derivation in docs/method.md).
-    """
-    if p_hat < eps:
-        p_hat = eps
-    elif p_hat > 1.0 - eps:
-        p_hat = 1.0 - eps
-    return _log(p_hat / (1.0 - p_hat)) - log_reference_odds
 
 
 def evidence_weight(w0: float, kappa: float, mass: float) -> float:

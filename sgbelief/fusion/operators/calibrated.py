@@ -12,11 +12,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from sgbelief.calibration.conformal import ConformalSlice, PredictionSet, no_coverage, prediction_set
+from sgbelief.calibration.isotonic import RefitIsotonic
+from sgbelief.calibration.mondrian import MondrianCalibrator
 from sgbelief.fusion import queues
-from sgbelief.fusion.calibration import MondrianCalibrator
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, paper_variant, resolve_config
-from sgbelief.fusion.conformal import ConformalSlice, PredictionSet, no_coverage, prediction_set
 from sgbelief.fusion.operators.base import BaseOperator, OperatorEngine
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_exceeds: re-exported)
@@ -63,7 +64,8 @@ class CalibratedOperator(BaseOperator):
     U_cal consults the geometric channel only for calibration, never to refuse a claim.
     ``engine``: an :class:`~sgbelief.fusion.operators.base.OperatorEngine`; None or ``"reference"``
     run the named steps; ``sgbelief.make_operator(..., engine="fast")`` passes the fused loop
-    (same results).
+    (same results). The calibrator's isotonic store is the engine's ``isotonic`` when it has one
+    (the fused engine's incremental merge), else the reference refit (same knots).
     """
 
     name = "cal"
@@ -81,7 +83,9 @@ class CalibratedOperator(BaseOperator):
         cfg = self.config
         import sklearn.isotonic  # noqa: F401  (pay the import here, not inside the first timed update)
 
-        self.calibrator_ = MondrianCalibrator(cfg.calibration, alpha=cfg.alpha)
+        # the engine's isotonic store (the fused engine injects its incremental merge; same knots)
+        isotonic = getattr(self.engine, "isotonic", RefitIsotonic)
+        self.calibrator_ = MondrianCalibrator(cfg.calibration, alpha=cfg.alpha, isotonic=isotonic)
         #: pair-level conformal scores s(p_v, y) per predicate (Property 1 on beliefs)
         self.pair_conformal_: dict[str, ConformalSlice] = {}
         #: claims applied so far per (v, phi), per provenance store (the support of the next claim)

@@ -1,0 +1,50 @@
+"""The calibrator's knobs (§4.1) as a validated, immutable pydantic model.
+
+:class:`~sgbelief.fusion.config.OperatorConfig` holds one as its ``calibration`` field; the
+derivations behind the defaults (``lr_reference``, ``kappa_pooling``, ``support_strata``, the cold
+start) are in ``docs/method.md``.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+__all__ = ["CalibrationConfig"]
+
+
+class CalibrationConfig(BaseModel):
+    """Knobs of the Mondrian isotonic calibrator and the conformal sets (§4.1)."""
+
+    # every float must be finite (``lr_max: .inf`` is rejected here, at the boundary)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    target_size: int = Field(50, ge=1, description="kappa_hat = min(1, effective size / target_size)")
+    kappa_min: float = Field(0.05, gt=0.0, le=1.0, description="floor of kappa_hat")
+    lr_max: float = Field(1000.0, gt=1.0, description="Lambda_hat clipped to [1/lr_max, lr_max]")
+    refit_growth: float = Field(0.1, gt=0.0, description="refit after the slice grew by this fraction")
+    min_refit: int = Field(8, ge=1, description="... or by at least this many outcomes")
+    cold_start: Literal["raw", "neutral"] = "raw"
+    lr_reference: Literal["slice", "uniform"] = Field(
+        "uniform",
+        description="odds Lambda_hat is measured against: the uniform prior Beta(1, 1) (default, docs/method.md) "
+        "or the slice's base rate among claims (the paper's reading)",
+    )
+    kappa_pooling: Literal["slice", "pooled"] = Field(
+        "slice",
+        description="kappa_hat from the (context, predicate) slice's size alone (paper) or from the pooled "
+        "levels the shrunk estimate actually uses",
+    )
+    support_strata: int = Field(
+        4,
+        ge=1,
+        description="Mondrian strata by the number of earlier claims at (v, phi): 0, 1, ..., S-1 or more "
+        "(1: no stratification, the paper's taxonomy)",
+    )
+    adaptive_gamma: float = Field(0.005, ge=0.0, lt=1.0, description="adaptive conformal step size")
+    buffer_size: int | None = Field(
+        262_144,
+        ge=16,
+        description="most recent verification outcomes kept per Mondrian slice (sliding window); null keeps all",
+    )
