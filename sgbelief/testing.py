@@ -5,7 +5,7 @@
 protocol (name, config, stats, pair_rule, update, update_many, tick, probability, retract); every
 report lists each targeted node once with a verdict and an action; masses <= tau_T are never
 applied; ``stats`` holds every counter and counts the events; beliefs stay finite and positive;
-each belief equals prior + sum of its logged increments (Eq. 5); probability is in [0, 1] and
+each belief equals prior + sum of its logged increments (Eq. 4); probability is in [0, 1] and
 equals the belief mean; ``update(..., report=False)`` and ``update_many`` leave what ``update``
 leaves (and ``update_many`` returns the reports' queue resolutions); an operator with a
 ``pair_rule`` gives the same map through the batched engine; ``retract`` removes an event
@@ -135,7 +135,7 @@ def check_fusion_operator(operator: FusionOperator, *, n_events: int = 300, seed
             "an operator with a pair_rule must give through the batched engine the map it gives event by event"
         )
         assert waved.stats == many.stats, "the batched engine must count what update_many counts"
-    # retract the last event with entries, on a copy: its entries go, Eq. 5 still holds
+    # retract the last event with entries, on a copy: its entries go, Eq. 4 still holds
     gone = next((e.id for e, _ in reversed(stream) if many_graph.provenance.has_event(e.id)), None)
     if gone is not None:
         ids = many.retract(many_graph, gone)
@@ -163,7 +163,7 @@ def _check_eq5(graph: SceneGraph, key: tuple[Any, str]) -> tuple[float, float]:
     assert math.isfinite(a) and math.isfinite(b) and a > 0 and b > 0, f"belief of {key} not finite/positive"
     ra, rb = prov.reconstruct(*key)
     assert math.isclose(a, ra, rel_tol=1e-9, abs_tol=1e-9) and math.isclose(b, rb, rel_tol=1e-9, abs_tol=1e-9), (
-        f"Eq. 5 violated at {key}: stored ({a}, {b}) vs log ({ra}, {rb})"
+        f"Eq. 4 violated at {key}: stored ({a}, {b}) vs log ({ra}, {rb})"
     )
     return a, b
 

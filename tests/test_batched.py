@@ -64,7 +64,7 @@ def _assert_same(records: list[EventRecord], name: str, config: dict[str, Any] |
     logged = {id(e) for log in prov._pairs.values() for e in log.entries}
     assert {id(e) for e in prov._timeline} <= logged  # the index and timeline share the log's objects
     assert {id(e) for v in prov.event_index().values() for e in v} <= logged
-    for key in prov.pairs():  # Eq. 5 still holds (up to the running sums' rounding)
+    for key in prov.pairs():  # Eq. 4 still holds (up to the running sums' rounding)
         assert prov.reconstruct(*key) == pytest.approx(prov.alpha_beta(*key), rel=1e-12)
     return graph
 

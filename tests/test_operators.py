@@ -1,4 +1,4 @@
-"""The six operators: protocol conformance, Eq. 4, Property 2, queues, retraction, invariance."""
+"""The six operators: protocol conformance, Eq. 3, Property 2, queues, retraction, invariance."""
 
 from __future__ import annotations
 

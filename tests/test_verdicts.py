@@ -2,7 +2,7 @@
 geometric observation) and the raw confidence, written by every calibrated writer (reference
 steps and fused loop), kept by both stores and both file formats (old files load with None),
 summarised by compaction (verdict counts, the Lambda-hat sum) and shown by ``sgbelief explain``.
-Lambda-hat and the weight are read back from the increments (Eq. 4 inverted)."""
+Lambda-hat and the weight are read back from the increments (Eq. 3 inverted)."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ from sgbelief.testing import conformance_table, random_stream, store_state
 TABLE = conformance_table()
 
 
-# ------------------------------------------------------------------ Eq. 4 inverted
+# ------------------------------------------------------------------ Eq. 3 inverted
 @settings(max_examples=500, deadline=None)
 @given(lam=st.floats(1e-6, 1e6), weight=st.floats(1e-6, 1e3))
 def test_lambda_hat_and_weight_are_read_back_from_the_increments(lam: float, weight: float) -> None:

@@ -40,7 +40,7 @@ def _markers(fig) -> list[int]:
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(name=st.sampled_from(OPERATOR_NAMES), seed=st.integers(0, 10_000), t_prov=st.sampled_from([5, 40, 100_000]))
 def test_trace_ends_at_the_pairs_belief(name: str, seed: int, t_prov: int) -> None:
-    """Eq. 5: replaying a pair's log from the prior gives its belief, compacted or not."""
+    """Eq. 4: replaying a pair's log from the prior gives its belief, compacted or not."""
     graph, _ = _run(name, 120, seed, t_prov)
     for node, pred in graph.provenance.pairs():
         tr = belief_trace(graph, node, pred)
@@ -84,7 +84,7 @@ def test_compacted_history_is_drawn_as_buckets() -> None:
     buckets = [e for e in tr.events if e.status == "compacted"]
     assert buckets and all(e.folded >= 1 for e in buckets)
     claims = sum(1 for ev, _ in stream if ev.predicate == pred and ev.targets.get(node, 0.0) > 0.1)
-    assert len(tr.events) < claims  # folded history: fewer steps, the same end point (Eq. 5)
+    assert len(tr.events) < claims  # folded history: fewer steps, the same end point (Eq. 4)
     a, b = graph.provenance.alpha_beta(node, pred)
     assert tr.final == (pytest.approx(a), pytest.approx(b))
     fig = trace_figure(graph, node)

@@ -11,7 +11,7 @@ the layers that own them::
     g.explain(node, "is_chair")  # sgbelief.graph.story.explain(g, node, predicate)
 
 and chooses the provenance store: ``engine="fast"`` (the default) or ``engine="reference"`` (the
-plain log of Eq. 5). ``sgbelief.SceneGraph`` is this class.
+plain log of Eq. 4). ``sgbelief.SceneGraph`` is this class.
 """
 
 from __future__ import annotations

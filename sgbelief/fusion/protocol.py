@@ -97,7 +97,7 @@ def increment_stance(d_alpha: Any, d_beta: Any) -> Any:
 
 # ----------------------------------------------------------------------------- pair-local rules
 class LinearRule(ABC):
-    """A rule linear in the targeting mass, whatever the belief (Eq. 4 with w = T(v))::
+    """A rule linear in the targeting mass, whatever the belief (Eq. 3 with w = T(v))::
 
         (p, q) = split(c),   d_alpha = T(v) p,   d_beta = T(v) q
 
@@ -117,7 +117,7 @@ class LinearRule(ABC):
 
 class ResetRule(ABC):
     """A rule that sets the belief to a target chosen by the claim, recorded as the increment
-    target - current so that Eq. 5 holds::
+    target - current so that Eq. 4 holds::
 
         (alpha*, beta*) = target(c, alpha_0, beta_0),   (d_alpha, d_beta) = (alpha* - alpha, beta* - beta)
 

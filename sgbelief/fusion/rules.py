@@ -11,8 +11,8 @@ verdict (compat)            :func:`verdict`
 support stratum             :func:`support_stratum`
 calibrated LR (Eq. 2)       :func:`calibrated_log_lr` (of :mod:`sgbelief.calibration.isotonic`)
 weight w = w0 kappa T(v)    :func:`evidence_weight`
-increments (Eq. 4)          :func:`claim_increments`
-Eq. 4 inverted (Λ̂, w)      :func:`claim_lambda_hat`, :func:`claim_weight`
+increments (Eq. 3)          :func:`claim_increments`
+Eq. 3 inverted (Λ̂, w)      :func:`claim_lambda_hat`, :func:`claim_weight`
 geometric observation       :func:`verification_increments`
 revision test (KL > tau)    :func:`revision_kl_exceeds` (bound: :func:`kl_upper_bound`)
 ==========================  ==========================================================
@@ -26,7 +26,7 @@ from scipy import special as _sp
 
 from sgbelief.calibration.isotonic import calibrated_log_lr  # Eq. 2 lives with the calibrator; re-exported
 from sgbelief.fusion.compatibility import Verdict
-# Eq. 4 inverted: defined with the provenance log, which reads its entries' Lambda-hat back (the
+# Eq. 3 inverted: defined with the provenance log, which reads its entries' Lambda-hat back (the
 # model layer cannot import this one); exported here, next to the equation they invert
 from sgbelief.graph.provenance_log import EntryVerdict, claim_lambda_hat, claim_weight
 
@@ -110,12 +110,12 @@ def stratified_context(context: str, stratum: int, n_strata: int) -> str:
 
 
 def evidence_weight(w0: float, kappa: float, mass: float) -> float:
-    """Per-target evidence weight: w T(v) with w = w0 kappa_hat (Eq. 4 and its shrinkage)."""
+    """Per-target evidence weight: w T(v) with w = w0 kappa_hat (Eq. 3 and its shrinkage)."""
     return w0 * kappa * mass
 
 
 def claim_increments(lam: float, weight: float) -> tuple[float, float]:
-    """Eq. 4: (d_alpha, d_beta) = (w T(v) Lambda / (1 + Lambda), w T(v) / (1 + Lambda)).
+    """Eq. 3: (d_alpha, d_beta) = (w T(v) Lambda / (1 + Lambda), w T(v) / (1 + Lambda)).
 
     ``weight`` is w T(v) (:func:`evidence_weight`). Under a Beta(1, 1) belief and weight 1 this is
     the exact Bayesian update of y by one observation of likelihood ratio Lambda.

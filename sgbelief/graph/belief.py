@@ -88,7 +88,7 @@ class BetaBelief:
         return beta_kl(self.alpha, self.beta, other.alpha, other.beta)
 
     def updated(self, d_alpha: float, d_beta: float) -> BetaBelief:
-        """The belief after adding pseudo-count increments (Eq. 4 / Eq. 5)."""
+        """The belief after adding pseudo-count increments (Eq. 3 / Eq. 4)."""
         return BetaBelief(self.alpha + d_alpha, self.beta + d_beta)
 
     def committed(self, tau: float = 0.5) -> bool:

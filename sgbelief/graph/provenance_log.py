@@ -4,7 +4,7 @@ and the fold that compaction applies to them.
 An entry is ``(event id, t, d_alpha, d_beta, status)`` plus the stance of its evidence and, for
 the calibrated operators, the verdict (:class:`EntryVerdict`) and the event's raw confidence; a
 claim's calibrated Lambda-hat and weight are not stored but read back from its increments
-(:func:`claim_lambda_hat`, :func:`claim_weight`, the inversion of Eq. 4). A pair's log
+(:func:`claim_lambda_hat`, :func:`claim_weight`, the inversion of Eq. 3). A pair's log
 (:class:`PairLog`) is its entries in order with the running belief. The belief is *defined*
 by the log (:func:`belief_from_entries`, Eq. 4); compaction folds old entries into one
 ``compacted`` entry of equal increment (:func:`fold_into_bucket`). The store of all logs, with
@@ -62,7 +62,7 @@ class EntryVerdict(IntEnum):
 
     @property
     def is_claim(self) -> bool:
-        """Whether the entry holds a claim's increments (Eq. 4), from which Lambda-hat follows."""
+        """Whether the entry holds a claim's increments (Eq. 3), from which Lambda-hat follows."""
         return self is not EntryVerdict.GEOMETRIC
 
 
@@ -81,9 +81,9 @@ _SYMBOL_ORDER = tuple(VERDICT_SYMBOLS.values())  # the order a summary lists its
 
 
 def claim_lambda_hat(d_alpha: float, d_beta: float) -> float | None:
-    """The calibrated Lambda-hat of a claim, read back from its increments (Eq. 4 inverted).
+    """The calibrated Lambda-hat of a claim, read back from its increments (Eq. 3 inverted).
 
-    Eq. 4 writes (d_alpha, d_beta) = (w Lambda / (1 + Lambda), w / (1 + Lambda)), so::
+    Eq. 3 writes (d_alpha, d_beta) = (w Lambda / (1 + Lambda), w / (1 + Lambda)), so::
 
         Lambda = d_alpha / d_beta
 
@@ -96,7 +96,7 @@ def claim_lambda_hat(d_alpha: float, d_beta: float) -> float | None:
 
 
 def claim_weight(d_alpha: float, d_beta: float) -> float:
-    """The weight w T(v) of a claim, read back from its increments (Eq. 4 inverted)::
+    """The weight w T(v) of a claim, read back from its increments (Eq. 3 inverted)::
 
         w T(v) = d_alpha + d_beta
 

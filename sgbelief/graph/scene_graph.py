@@ -36,7 +36,7 @@ class SceneGraph:
 
     Node attributes are plain dicts on ``graph.nx.nodes[n]`` (``centroid``, ``bbox``, ``label``
     and anything the user adds); relation edges are keyed by their relation name. Beliefs live
-    in ``graph.provenance`` so that every one of them is reconstructable from its log (Eq. 5).
+    in ``graph.provenance`` so that every one of them is reconstructable from its log (Eq. 4).
 
     ``vocabulary``: when given (an iterable of predicate names, or an object with a
     ``predicates`` attribute such as a SubsumptionTable), belief reads and updates of any other

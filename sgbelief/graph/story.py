@@ -5,7 +5,7 @@ The story is read from the provenance log alone (§4.3), so it is the same for a
 and for one loaded from graph.json or graph.npz. Each entry written by a calibrated operator
 records its verdict (⊤ / ⊥ / ∅, or "geometric" for the geometric label observed as evidence)
 and the event's raw confidence; a claim's calibrated Lambda-hat and weight are read back from its
-increments (Eq. 4 inverted: :func:`~sgbelief.graph.provenance_log.claim_lambda_hat`,
+increments (Eq. 3 inverted: :func:`~sgbelief.graph.provenance_log.claim_lambda_hat`,
 :func:`~sgbelief.graph.provenance_log.claim_weight`). Compaction (T_prov) folds old entries into
 one ``compacted`` bucket; its :class:`~sgbelief.graph.provenance_log.FoldSummary` keeps how
 many entries of each status and verdict it folded, the sum of their Lambda-hat, the time range
@@ -42,7 +42,7 @@ REFUSAL_STATUSES = frozenset(
 )
 #: what the provenance log does not keep (said once in every story)
 NOT_RECORDED = (
-    "Λ̂ = dα/dβ and the weight w·T(v) = dα + dβ are read back from each claim's increments (Eq. 4 "
+    "Λ̂ = dα/dβ and the weight w·T(v) = dα + dβ are read back from each claim's increments (Eq. 3 "
     "inverted), not stored; not kept: how the weight splits into w0·κ̂·T(v), the event's other "
     "targets, and retracted events (they leave no entry); a compacted bucket keeps only its counts "
     "per status and verdict, time range, sums and mean Λ̂"
@@ -141,7 +141,7 @@ def _event(entry: ProvenanceEntry) -> StoryEvent:
         symbol = VERDICT_SYMBOLS[v]
         lam = claim_lambda_hat(da, db) if v != EntryVerdict.GEOMETRIC else None
         weight: float | None = claim_weight(da, db)
-    elif status in REFUSAL_STATUSES:  # a refused claim: its increments are a claim's (Eq. 4)
+    elif status in REFUSAL_STATUSES:  # a refused claim: its increments are a claim's (Eq. 3)
         symbol, lam, weight = _BOTTOM, claim_lambda_hat(da, db), claim_weight(da, db)
     else:
         symbol, lam, weight = None, None, None

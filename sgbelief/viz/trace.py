@@ -1,6 +1,6 @@
 """One (element, predicate) belief over time, read from its provenance (Figure 1(a) for any pair).
 
-The belief is defined by its log (Eq. 5): the prior plus the counted increments. Replaying the
+The belief is defined by its log (Eq. 4): the prior plus the counted increments. Replaying the
 pair's entries in time order therefore gives the posterior after each event, exactly as the
 store holds it: the last point of the trace is the pair's current belief. Entries an event
 recorded at the pair (a verification increment and the claim's own) form one trace event; a
@@ -53,7 +53,7 @@ class BeliefTrace:
 
     @property
     def final(self) -> tuple[float, float]:
-        """(alpha, beta) after the last event: the pair's belief by Eq. 5."""
+        """(alpha, beta) after the last event: the pair's belief by Eq. 4."""
         a, b = self.prior
         for e in self.events:
             a, b = a + e.d_alpha, b + e.d_beta

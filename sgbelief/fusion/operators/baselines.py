@@ -32,7 +32,7 @@ class MajorityVoteRule(LinearRule):
 @dataclass(frozen=True)
 class NaiveBayesRule(LinearRule):
     """Naive Bayes with a fixed reliability r: the raw confidence seen through a symmetric channel,
-    p = r c + (1 - r)(1 - c), Lambda = p / (1 - p), then Eq. 4 with w = T(v)::
+    p = r c + (1 - r)(1 - c), Lambda = p / (1 - p), then Eq. 3 with w = T(v)::
 
         d_alpha = T(v) p,   d_beta = T(v) (1 - p)
     """
@@ -68,7 +68,7 @@ class OverwriteOperator(BaseOperator):
 
     Each event sets B(v, phi) to a high-confidence belief in the claim's direction
     (s = ``baselines.overwrite.strength``, default 9 -> mean 0.91). Represents label
-    assignment by the most recent detection. Recorded as the increment new - old, so Eq. 5 holds.
+    assignment by the most recent detection. Recorded as the increment new - old, so Eq. 4 holds.
     """
 
     name = "overwrite"

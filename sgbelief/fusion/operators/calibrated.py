@@ -52,7 +52,7 @@ class CalibratedOperator(BaseOperator):
 
     1. the claim's support stratum (earlier claims at (v, phi)) refines its Mondrian cell;
     2. Lambda_hat, kappa_hat from the Mondrian isotonic calibrator of that cell (Eq. 2);
-    3. candidate increments (Eq. 4) with w = w0 kappa_hat T(v)::
+    3. candidate increments (Eq. 3) with w = w0 kappa_hat T(v)::
 
            d_alpha = w Lambda / (1 + Lambda),   d_beta = w / (1 + Lambda)
 
@@ -174,7 +174,7 @@ class CalibratedOperator(BaseOperator):
                 prov.record(node, pred, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1 if y == 1 else -1,
                             EntryVerdict.GEOMETRIC, c)
                 a, b = a + ga, b + gb
-        da, db = claim_increments(lam, evidence_weight(cfg.w0, kappa, mass))  # Eq. 4
+        da, db = claim_increments(lam, evidence_weight(cfg.w0, kappa, mass))  # Eq. 3
         if self.check_compatibility and v is _CONTRA:  # refusal (Property 2)
             stance = -1 if asserts else 1  # geometry's stance opposes the claim
             prov.record(node, pred, event.id, event.t, da, db, EntryStatus.REFUSED, stance, code, c)
