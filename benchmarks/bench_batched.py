@@ -42,8 +42,10 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=5, help="batched runs per operator (best is reported)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    from sgbelief.eval.batched import BATCHED_OPERATORS, EventColumns, batched_replay, random_records
+    from sgbelief._fast.batched import EventColumns, batched_replay
     from sgbelief.eval.replay import make_runs, replay
+    from sgbelief.fusion.registry import OPERATOR_NAMES
+    from sgbelief.eval.random_stream import random_records
 
     recs, gen_s = _cpu(lambda: random_records(0, args.events, n_nodes=args.nodes))
     col_times = []
@@ -55,7 +57,7 @@ def main() -> int:
     sub = recs[:n_stream]
     sub_cols = cols if n_stream == args.events else EventColumns.from_records(sub)
     out = {}
-    for name in BATCHED_OPERATORS:
+    for name in [n for n in OPERATOR_NAMES if make_runs([n], None)[0].operator.pair_rule is not None]:
         phases: dict[str, list[float]] = {}
         total = []
         for _ in range(args.repeat):

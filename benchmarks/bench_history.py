@@ -34,7 +34,7 @@ def main() -> int:
     from sgbelief.eval.replay import make_runs
     from sgbelief.fusion.compatibility import SubsumptionTable
     from sgbelief.fusion.config import OperatorConfig
-    from sgbelief.gc_tuning import relaxed_gc
+    from sgbelief._fast.gc import relaxed_gc
 
     cfg = OperatorConfig()
     if args.buffer_size != "default":

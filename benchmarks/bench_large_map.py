@@ -9,8 +9,8 @@ CPU time from ``process_time``, the fairer figure on a shared machine):
 3. ``build_nodes``: geometry (bbox, scene, floor_z) on all N nodes;
 4. ``npz_save`` / ``npz_load``: the binary layout (:mod:`sgbelief.graph.binary`), its file size
    and its JSON-equivalent throughput = JSON file size / binary time (run first, on the heap the
-   graph was built in). The load defers the settled provenance entries to the first read of a
-   log; ``npz_materialize`` (after the queries, which read beliefs only) is that first read, and
+   graph was built in). The load (the fast loader, ``sgbelief._fast.loading.FAST_LOADING``) defers
+   the settled provenance entries to the first read of a log; ``npz_materialize`` (after the queries, which read beliefs only) is that first read, and
    ``npz_load_materialized_*`` counts both;
    ``objects_floor``: building the loaded graph's Python objects alone (networkx's node and
    adjacency dicts, the attribute dicts and ``bbox`` tuples, the (node, predicate) -> belief dict)
@@ -60,10 +60,19 @@ class _Steps:
 
 
 def _floor_lists(g: Any) -> tuple[list[Any], ...]:
-    """The loaded graph's contents as the flat lists ``_objects_floor`` builds from, untimed."""
-    ids, numbers, scenes, floor_z, pair_nodes, pair_preds, alpha, beta, *_ = _save_floor(g)
+    """The loaded graph's contents as the flat lists ``_objects_floor`` builds from, untimed (the
+    beliefs read pair by pair: the deferred log entries stay unbuilt)."""
+    from itertools import chain
+    from operator import itemgetter
+
+    attrs = list(map(itemgetter(1), g.nx.nodes(data=True)))
+    ids = list(g.nx.nodes)
+    numbers = list(chain.from_iterable(chain.from_iterable(map(itemgetter("bbox"), attrs))))
     cols = [numbers[j::6] for j in range(6)]  # bbox lo x, y, z, hi x, y, z
-    return ids, cols, scenes, floor_z, list(zip(pair_nodes, pair_preds)), alpha, beta
+    keys = list(g.provenance.pairs())
+    beliefs = [g.provenance.alpha_beta(*k) for k in keys]
+    return (ids, cols, list(map(itemgetter("scene"), attrs)), list(map(itemgetter("floor_z"), attrs)), keys,
+            [a for a, _ in beliefs], [b for _, b in beliefs])
 
 
 def _save_floor(g: Any) -> tuple[list[Any], ...]:
@@ -80,8 +89,8 @@ def _save_floor(g: Any) -> tuple[list[Any], ...]:
     scenes = list(map(itemgetter("scene"), attrs))
     floor_z = list(map(itemgetter("floor_z"), attrs))
     prov = g.provenance
-    keys = list(prov._pairs)
-    logs = list(prov._pairs.values())
+    keys = list(prov.logs())
+    logs = list(prov.logs().values())
     pair_nodes, pair_preds = list(map(itemgetter(0), keys)), list(map(itemgetter(1), keys))
     alpha, beta = list(map(attrgetter("alpha"), logs)), list(map(attrgetter("beta"), logs))
     per_pair = list(map(attrgetter("entries"), logs))
@@ -97,18 +106,18 @@ def _objects_floor(ids: list[Any], cols: list[list[float]], scenes: list[str], f
     """Build the Python objects of the loaded graph from the lists, as cheaply as Python allows."""
     import networkx as nx
 
-    from sgbelief.graph.binary import _young_collections_only
-    from sgbelief.graph.provenance import _PairLog
+    from sgbelief.graph.npz_archive import young_collections_only
+    from sgbelief.graph.provenance import PairLog
 
     n = len(ids)
-    with _young_collections_only():
+    with young_collections_only():
         bbox = list(zip(zip(cols[0], cols[1], cols[2]), zip(cols[3], cols[4], cols[5])))
         attrs = [{"bbox": b, "scene": s, "floor_z": z} for b, s, z in zip(bbox, scenes, floor_z)]
         g = nx.MultiDiGraph()
         g._node.update(zip(ids, attrs))
         g._succ.update(zip(ids, [{} for _ in range(n)]))
         g._pred.update(zip(ids, [{} for _ in range(n)]))
-        pairs = dict(zip(keys, map(_PairLog, alpha, beta)))
+        pairs = dict(zip(keys, map(PairLog, alpha, beta)))
     return g, pairs
 
 
@@ -122,9 +131,10 @@ def main() -> int:
     args = ap.parse_args()
     import numpy as np
 
-    from sgbelief.eval.batched import EventColumns, batched_replay
+    from sgbelief._fast.batched import EventColumns, batched_replay
+    from sgbelief._fast.loading import FAST_LOADING
     from sgbelief.fusion.compatibility import SubsumptionTable
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.graph.persistence import load_graph, save_graph
     from sgbelief.query import QueryEngine, named_queries
 
     wall0 = time.perf_counter()
@@ -162,17 +172,17 @@ def main() -> int:
     prov = g.provenance
     res: dict[str, Any] = {
         "bench": "large_map", "nodes": n, "predicates": 3, "events": n, "engine": "batched majority",
-        "pairs_with_evidence": len(prov), "log_entries": sum(len(log.entries) for log in prov._pairs.values()),
+        "pairs_with_evidence": len(prov), "log_entries": sum(len(log.entries) for log in prov.logs().values()),
         "compacted_entries": prov.n_compacted,
     }
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_TMP")) as d:
         # binary first, on the heap the graph was built in (as after a mapping run); then JSON
         bpath = os.path.join(d, "big.npz")
-        steps.run("npz_save", lambda: g.save(bpath))
+        steps.run("npz_save", lambda: save_graph(g, bpath))
         npz_mb = os.path.getsize(bpath) / 1e6
         prov.materialize()  # the save did (its journal is empty after the batched engine)
         steps.run("save_floor", lambda: _save_floor(g))
-        g2 = steps.run("npz_load", lambda: SceneGraph.load(bpath))
+        g2 = steps.run("npz_load", lambda: load_graph(bpath, loading=FAST_LOADING))
         # the floor on the same heap (original and loaded graph alive: both take fresh memory)
         floor_lists = _floor_lists(g2)
         floor = steps.run("objects_floor", lambda: _objects_floor(*floor_lists))
@@ -181,9 +191,9 @@ def main() -> int:
         json_mb = None
         if not args.no_json:
             jpath = os.path.join(d, "big.json")
-            steps.run("json_save", lambda: g.save(jpath))
+            steps.run("json_save", lambda: save_graph(g, jpath))
             json_mb = os.path.getsize(jpath) / 1e6
-            g_json = steps.run("json_load", lambda: SceneGraph.load(jpath))
+            g_json = steps.run("json_load", lambda: load_graph(jpath, loading=FAST_LOADING))
             assert len(g_json) == len(g)
             g_json = None
             gc.collect()

@@ -26,7 +26,7 @@ def _run(operator: str, interval: int | None, args: argparse.Namespace) -> dict[
     from sgbelief.eval.replay import make_runs
     from sgbelief.fusion.compatibility import SubsumptionTable
     from sgbelief.fusion.config import OperatorConfig
-    from sgbelief.gc_tuning import relaxed_gc
+    from sgbelief._fast.gc import relaxed_gc
 
     cfg = OperatorConfig(t_compact=interval)
     run = make_runs([operator], SubsumptionTable.shipped("kitti360"), cfg)[0]

@@ -4,7 +4,7 @@ Each operator first replays the stream once (warm: calibration buffer filled), t
 stream again shifted in time with new event ids, timed (process CPU time). Four settings per
 operator: ``report`` (update() with its per-target report, CPython's default collector settings),
 ``no_report`` (report=False, default collector), ``replay`` (report=False inside
-``sgbelief.gc_tuning.relaxed_gc``) and ``many`` (one ``update_many`` call over the stream inside
+``sgbelief._fast.gc.relaxed_gc``) and ``many`` (one ``update_many`` call over the stream inside
 ``relaxed_gc``, as ``sgbelief replay`` / ``bench`` run it: the same per-event updates, the per-call
 set-up done once). The reference loop is a plain Python loop doing one dict increment per event
 over the same event objects, in the same run.
@@ -67,7 +67,7 @@ def main() -> int:
         return max(n / ref_pass() for _ in range(args.repeat))
 
     try:
-        from sgbelief.gc_tuning import relaxed_gc
+        from sgbelief._fast.gc import relaxed_gc
     except ImportError:  # an older checkout (before/after comparisons): same setting by hand
         import contextlib
         import gc

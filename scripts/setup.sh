@@ -32,4 +32,10 @@ if ! "$VENV/bin/python" -c "import ray" >/dev/null 2>&1; then
     echo "[setup] installing ray (optional: --executor ray)"
     $PIP install -q "ray>=2.9" || echo "[setup] warning: ray did not install; --executor ray and its tests are unavailable" >&2
 fi
+# rerun-sdk (the optional extra sgbelief[rerun], for sgbelief record): best effort as well; the
+# recording tests skip where it does not install.
+if ! "$VENV/bin/python" -c "import rerun" >/dev/null 2>&1; then
+    echo "[setup] installing rerun-sdk (optional: sgbelief record)"
+    $PIP install -q "rerun-sdk>=0.41,<0.42" || echo "[setup] warning: rerun-sdk did not install; sgbelief record and its tests are unavailable" >&2
+fi
 "$VENV/bin/python" -c "import sgbelief, sys; print('[setup] sgbelief', sgbelief.__version__, 'ready on Python', sys.version.split()[0])"

@@ -10,14 +10,14 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.1.0"
+from sgbelief.version import __version__
 
 # public name -> module that defines it
 _EXPORTS: dict[str, str] = {
     "BetaBelief": "sgbelief.graph.belief",
     "ProvenanceStore": "sgbelief.graph.provenance",
     "EntryStatus": "sgbelief.graph.provenance",
-    "SceneGraph": "sgbelief.graph.scene_graph",
+    "SceneGraph": "sgbelief.api.scene_graph",
     "EvidenceEvent": "sgbelief.fusion.events",
     "GeometricChannel": "sgbelief.fusion.channel",
     "RecordedChannel": "sgbelief.fusion.channel",
@@ -26,7 +26,7 @@ _EXPORTS: dict[str, str] = {
     "OperatorConfig": "sgbelief.fusion.config",
     "FusionOperator": "sgbelief.fusion.protocol",
     "UpdateReport": "sgbelief.fusion.protocol",
-    "make_operator": "sgbelief.fusion.registry",
+    "make_operator": "sgbelief.api.operators",
     "OPERATOR_NAMES": "sgbelief.fusion.registry",
 }
 
@@ -52,7 +52,8 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from sgbelief.fusion.config import OperatorConfig
     from sgbelief.fusion.events import EvidenceEvent
     from sgbelief.fusion.protocol import FusionOperator, UpdateReport
-    from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator
+    from sgbelief.api.operators import make_operator
+    from sgbelief.fusion.registry import OPERATOR_NAMES
     from sgbelief.graph.belief import BetaBelief
     from sgbelief.graph.provenance import EntryStatus, ProvenanceStore
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.api.scene_graph import SceneGraph

@@ -1,32 +1,25 @@
-"""Cyclic garbage-collector settings for long replays.
+"""Deprecated: the cyclic-GC settings moved to :mod:`sgbelief._fast.gc` (one place for all of them).
 
-A map holds one provenance entry object per update inside the horizon T_prov, plus the events a
-replay keeps in memory. CPython's cyclic collector runs a young-generation pass every 700 net
-container allocations and regularly re-traverses every surviving object, so on a long stream a
-large share of the time goes to the collector rather than to fusion (measured in
-``benchmarks/bench_throughput.py``). The maps themselves create no reference cycles on the hot
-path, so a higher threshold only delays, never prevents, the collection of real garbage.
+``sgbelief.gc_tuning.relaxed_gc`` and ``REPLAY_GC_THRESHOLD`` still work and warn.
 """
 
 from __future__ import annotations
 
-import gc
-from collections.abc import Iterator
-from contextlib import contextmanager
+import importlib
+import warnings
+from typing import Any
 
-#: generation-0 threshold used while replaying (CPython's default is 700)
-REPLAY_GC_THRESHOLD = 100_000
+_MOVED = {"relaxed_gc": "sgbelief._fast.gc", "REPLAY_GC_THRESHOLD": "sgbelief._fast.gc"}
 
 
-@contextmanager
-def relaxed_gc(threshold0: int = REPLAY_GC_THRESHOLD) -> Iterator[None]:
-    """Raise the collector's generation-0 threshold for the duration of a replay, then restore it.
+def __getattr__(name: str) -> Any:
+    home = _MOVED.get(name)
+    if home is None:
+        raise AttributeError(f"module 'sgbelief.gc_tuning' has no attribute {name!r}")
+    warnings.warn(f"sgbelief.gc_tuning.{name} moved to {home}.{name}; sgbelief.gc_tuning will be removed",
+                  DeprecationWarning, stacklevel=2)
+    return getattr(importlib.import_module(home), name)
 
-    Nested uses are safe (the outermost restores the caller's setting); collection stays enabled.
-    """
-    old = gc.get_threshold()
-    gc.set_threshold(max(int(threshold0), old[0]), *old[1:])
-    try:
-        yield
-    finally:
-        gc.set_threshold(*old)
+
+def __dir__() -> list[str]:
+    return sorted(_MOVED)

@@ -9,7 +9,7 @@ import pytest
 from sgbelief.cli import main
 from sgbelief.errors import InvalidEventError
 from sgbelief.fusion.events import EvidenceEvent
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief import SceneGraph
 from sgbelief.query import run_query
 from sgbelief.query.named import UnknownNamedQueryError
 

@@ -9,16 +9,21 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sgbelief.eval.batched import (
-    BATCHED_OPERATORS,
-    EventColumns,
-    batched_replay,
-    provenance_signature,
-    random_records,
-)
+from sgbelief._fast.batched import EventColumns, batched_replay
+from sgbelief.api.operators import make_operator
 from sgbelief.eval.formats import EventRecord
+from sgbelief.eval.random_stream import random_records
 from sgbelief.eval.replay import OperatorRun, make_runs, replay
+from sgbelief.fusion.registry import OPERATOR_NAMES
 from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.testing import provenance_signature
+
+#: the shipped operators that declare a pair rule (the batched engine asks the operator)
+BATCHED_OPERATORS = [name for name in OPERATOR_NAMES if make_operator(name).pair_rule is not None]
+
+
+def test_the_pair_local_baselines_declare_their_rule() -> None:
+    assert BATCHED_OPERATORS == ["overwrite", "majority", "naive_bayes"]
 
 
 def _streaming(records: list[EventRecord], name: str, config: dict[str, Any] | None = None, *,
@@ -138,8 +143,11 @@ def test_bench_large_map_style_columns() -> None:
 
 
 def test_batched_rejects_calibrated_operators_and_decreasing_time() -> None:
-    with pytest.raises(ValueError, match="streaming"):
-        batched_replay(EventColumns.from_records(random_records(0, 5)), "comod")
+    for name in ("comod", "refined"):
+        with pytest.raises(ValueError, match="streaming"):
+            batched_replay(EventColumns.from_records(random_records(0, 5)), name)
+    with pytest.raises(ValueError, match="config"):
+        batched_replay(EventColumns.from_records(random_records(0, 5)), make_operator("majority"), None, {"t_prov": 3})
     recs = random_records(0, 20)
     recs[10] = recs[10]._replace(t=recs[9].t - 1) if recs[9].t > 0 else recs[10]._replace(t=-1)
     with pytest.raises(ValueError, match="non-decreasing"):

@@ -15,7 +15,7 @@ def test_latency_benchmark_reports_both_schedules() -> None:
     out = subprocess.run(
         [sys.executable, str(BENCH / "bench_latency.py"), "--events", "24000", "--pairs", "600",
          "--events-per-step", "10", "--operator", "majority", "--intervals", "default,10", "--json"],
-        capture_output=True, text=True, check=True, timeout=300,
+        capture_output=True, text=True, check=True, timeout=900,
     ).stdout
     res = json.loads(out.strip().splitlines()[-1])
     default, short = res["schedules"]["default"], res["schedules"]["10"]
@@ -32,7 +32,7 @@ def test_ab_benchmark_compares_two_checkouts() -> None:
     out = subprocess.run(
         [sys.executable, str(BENCH / "bench_ab.py"), "--old", root, "--new", root, "--operators", "majority",
          "--rounds", "1", "--repeat", "1", "--new-mode", "many", "--json"],
-        capture_output=True, text=True, check=True, timeout=300,
+        capture_output=True, text=True, check=True, timeout=900,
     ).stdout
     res = json.loads(out.strip().splitlines()[-1])
     assert (res["old_mode"], res["new_mode"]) == ("update", "many")
@@ -45,7 +45,7 @@ def test_large_map_benchmark_round_trips_and_reports_every_step(tmp_path: Path) 
     materialised, and the object floor and every named query are reported."""
     out = subprocess.run(
         [sys.executable, str(BENCH / "bench_large_map.py"), "--nodes", "3000", "--verify", "--json"],
-        capture_output=True, text=True, check=True, timeout=300, env={**os.environ, "BENCH_TMP": str(tmp_path)},
+        capture_output=True, text=True, check=True, timeout=900, env={**os.environ, "BENCH_TMP": str(tmp_path)},
     ).stdout
     res = json.loads(out.strip().splitlines()[-1])
     assert res["verified_equal"] is True and res["npz_load_deferred"] is True
@@ -62,7 +62,7 @@ def test_throughput_benchmark_reports_both_normalisations() -> None:
     script = str(BENCH / "bench_throughput.py")
     out = subprocess.run(
         [sys.executable, script, "--operators", "majority", "--repeat", "1", "--scale", "0.1", "--json"],
-        capture_output=True, text=True, check=True, timeout=300,
+        capture_output=True, text=True, check=True, timeout=900,
     ).stdout
     res = json.loads(out.strip().splitlines()[-1])
     assert list(res["operators"]) == ["majority"] and res["reference_loop_events_per_s"] > 0

@@ -16,16 +16,33 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
+from sgbelief._fast.loading import FAST_LOADING
 from sgbelief.cli import main
 from sgbelief.errors import FormatError, RetractionError
 from sgbelief.fusion import queues
 from sgbelief.fusion.channel import FrameLabels
-from sgbelief.fusion.registry import make_operator
+from sgbelief.api.operators import make_operator
 from sgbelief.graph.binary import FORMAT, graph_to_arrays, load_graph_npz
-from sgbelief.graph.persistence import graph_to_dict
+from sgbelief.graph.npz_archive import CHUNK
+from sgbelief.graph.npz_columns import pylist
+from sgbelief.graph.persistence import graph_to_dict, load_graph
 from sgbelief.graph.provenance import EntryStatus
-from sgbelief.graph.scene_graph import SceneGraph
-from sgbelief.testing import conformance_table, random_stream
+from sgbelief.api.scene_graph import SceneGraph
+from sgbelief.testing import apply_store_operations, conformance_table, random_stream, store_state
+
+
+def load_fast(path: Path, **kw: Any) -> SceneGraph:
+    """A graph whose store is journalled, its binary entries deferred to the first read."""
+    return load_graph(path, loading=FAST_LOADING, **kw)
+
+
+#: the reference loader (every entry built at once) and the fast one
+def load_reference(path: Path, **kw: Any) -> SceneGraph:
+    """A graph whose store is the reference log, every entry built at load."""
+    return SceneGraph.load(path, engine="reference", **kw)
+
+
+LOADERS = [pytest.param(load_reference, id="reference"), pytest.param(load_fast, id="fast")]
 
 
 # ---------------------------------------------------------------- helpers
@@ -68,11 +85,12 @@ def _signature(g: SceneGraph) -> dict[str, Any]:
         "corr": [(e.event_id, e.corroborated_by) for e in prov.iter_entries()],
         "quarantine": [e.as_tuple() for e in prov.quarantine if e.alive and e.status is EntryStatus.QUARANTINED],
         "disagreement": [e.as_tuple() for e in prov.disagreement if e.alive and e.status is EntryStatus.REFUSED],
-        "timeline": [e.as_tuple() for e in prov._timeline if e.alive],
+        "timeline": [e.as_tuple() for e in prov.compaction_timeline() if e.alive],
         "by_event": {k: sorted(e.as_tuple() for e in v) for k, v in prov.event_index().items()},
-        "compacted": (list(prov._compacted_order), prov._compacted_order.maxlen, prov.n_compacted, prov.remember_compacted),
-        "nodes_of_entries": all(e.node == k[0] and e.predicate == k[1] for k, log in prov._pairs.items()
+        "compacted": (prov.compacted_ids(), prov.n_compacted, prov.remember_compacted),
+        "nodes_of_entries": all(e.node == k[0] and e.predicate == k[1] for k, log in prov.logs().items()
                                 for e in log.entries),
+        "pending": {k: [e.as_tuple() for e in prov.pending(*k)] for k in prov.pairs() if prov.pending(*k)},
     }
 
 
@@ -96,11 +114,12 @@ def saved(tmp_path: Path) -> tuple[SceneGraph, Path]:
 
 
 # ------------------------------------------------------------ round trips
-def test_round_trip_is_lossless_and_matches_json(tmp_path: Path, saved: tuple[SceneGraph, Path]) -> None:
+@pytest.mark.parametrize("load", LOADERS)
+def test_round_trip_is_lossless_and_matches_json(tmp_path: Path, saved: tuple[SceneGraph, Path], load: Any) -> None:
     g, path = saved
     assert path.name == "g.npz" and path.read_bytes()[:4] == b"PK\x03\x04"
     thresholds, enabled = gc.get_threshold(), gc.isenabled()
-    h = SceneGraph.load(path)
+    h = load(path)
     g.save(path)
     assert gc.get_threshold() == thresholds and gc.isenabled() == enabled  # collector settings restored
     assert _signature(h) == _signature(g)
@@ -114,7 +133,8 @@ def test_round_trip_is_lossless_and_matches_json(tmp_path: Path, saved: tuple[Sc
     for key in prov.pairs():
         assert h.provenance.alpha_beta(*key) == prov.alpha_beta(*key)  # bit for bit
     # the same Python values and types as loading the JSON file of the same graph
-    j = SceneGraph.load(g.save(tmp_path / "g.json"))
+    j = load(g.save(tmp_path / "g.json"))
+    assert type(j.provenance) is type(h.provenance)
     hd = graph_to_dict(h)
     for pair in hd["provenance"]["pairs"]:
         for entry in pair["entries"]:
@@ -125,8 +145,7 @@ def test_round_trip_is_lossless_and_matches_json(tmp_path: Path, saved: tuple[Sc
         assert {k: type(v) for k, v in h.node_attrs(n).items()} == {k: type(v) for k, v in j.node_attrs(n).items()}
     assert h.node_attrs("n0")["bbox"] == ((-0.3, -0.3, 0.0), (0.3, 0.3, 1.0))
     assert h.node_attrs("n0")["nul"] == "a\x00b" and h.node_attrs("n0")["big"] == 2**70
-    assert {k: [e.as_tuple() for e in v] for k, v in h.provenance._pending_by_pair.items()} == {
-        k: [e.as_tuple() for e in v] for k, v in j.provenance._pending_by_pair.items()}
+    assert _signature(h)["pending"] == _signature(j)["pending"]
 
 
 def test_directory_dispatch_and_format_keyword(tmp_path: Path) -> None:
@@ -149,14 +168,15 @@ def test_directory_dispatch_and_format_keyword(tmp_path: Path) -> None:
         SceneGraph.load(tmp_path / "bin.json")
 
 
-def test_empty_graph_and_distinct_but_equal_node_objects(tmp_path: Path) -> None:
+@pytest.mark.parametrize("load", LOADERS)
+def test_empty_graph_and_distinct_but_equal_node_objects(tmp_path: Path, load: Any) -> None:
     g = SceneGraph()
-    assert graph_to_dict(SceneGraph.load(g.save(tmp_path / "e.npz"))) == graph_to_dict(g)
+    assert graph_to_dict(load(g.save(tmp_path / "e.npz"))) == graph_to_dict(g)
     g.add_node("".join(["n", "1"]), scene="a")
     g.add_node(10**30, scene=5)  # int id beyond int64; attribute column of mixed types
     g.provenance.record("".join(["n", "1"]), "is_car", "e1", 0, 1.0, 0.0)  # a different str object
     g.provenance.record(10**30, "is_car", "e2", 0, 0.0, 1.0)
-    h = SceneGraph.load(g.save(tmp_path / "g.npz"))
+    h = load(g.save(tmp_path / "g.npz"))
     assert _signature(h) == _signature(g)
     g.provenance.record("ghost", "is_car", "e3", 0, 1.0, 0.0)
     with pytest.raises(ValueError, match="does not contain"):
@@ -231,7 +251,7 @@ def test_random_streams_round_trip_and_stay_usable(tmp_path: Path, ops: list[tup
         g.add_node(n, centroid=(0.0, 1.0, 2.0))
     _apply(g, ops)
     path = g.save(tmp_path / "r.npz")
-    lazy = SceneGraph.load(path)  # entries deferred until the first read below
+    lazy = load_fast(path)  # entries deferred until the first read below
     h = SceneGraph.load(path)
     assert _signature(h) == _signature(g)
     for key in g.provenance.pairs():
@@ -253,7 +273,7 @@ def test_operator_stream_on_a_deferred_load(tmp_path: Path, name: str) -> None:
     """An operator continues on a freshly loaded graph whose entries are not built yet (queue
     timeouts, journaled commits, refusals, compaction): same graph as continuing the original."""
     g = _rich_graph()
-    h = SceneGraph.load(g.save(tmp_path / "g.npz"))
+    h = load_fast(g.save(tmp_path / "g.npz"))
     assert h.provenance.deferred and h.provenance.quarantine and not h.provenance._timeline
     start = g.clock + 30  # the first tick expires the pending entries (transitions while deferred)
     for graph in (g, h):
@@ -263,9 +283,10 @@ def test_operator_stream_on_a_deferred_load(tmp_path: Path, name: str) -> None:
     assert _signature(h) == _signature(g)
 
 
-def test_store_usable_after_load_on_operator_stream(tmp_path: Path) -> None:
+@pytest.mark.parametrize("load", LOADERS)
+def test_store_usable_after_load_on_operator_stream(tmp_path: Path, load: Any) -> None:
     g = _rich_graph()
-    h = SceneGraph.load(g.save(tmp_path / "g.npz"))
+    h = load(g.save(tmp_path / "g.npz"))
     for graph in (g, h):
         prov = graph.provenance
         assert sorted(prov.retract("q2")) == ["corr-1", "q2"]
@@ -283,9 +304,10 @@ def test_store_usable_after_load_on_operator_stream(tmp_path: Path) -> None:
     assert graph_to_dict(h) == graph_to_dict(g)
 
 
-def test_networkx_structure_after_load(saved: tuple[SceneGraph, Path]) -> None:
+@pytest.mark.parametrize("load", LOADERS)
+def test_networkx_structure_after_load(saved: tuple[SceneGraph, Path], load: Any) -> None:
     g, path = saved
-    h = SceneGraph.load(path)
+    h = load(path)
     assert sorted(map(str, h.nx.successors("n0"))) == ["7", "n1"] and sorted(h.nx.predecessors(7)) == ["n0", "n1"]
     h.add_relation(7, "n0", "under")
     h.merge_nodes("n0", "n1")
@@ -520,12 +542,11 @@ def _big_graph(n: int) -> SceneGraph:
     return g
 
 
-def test_large_graph_round_trip_is_bit_exact(tmp_path: Path) -> None:
-    from sgbelief.graph.binary import _CHUNK
-
-    n = _CHUNK + 1500
+@pytest.mark.parametrize("load", LOADERS)
+def test_large_graph_round_trip_is_bit_exact(tmp_path: Path, load: Any) -> None:
+    n = CHUNK + 1500
     g = _big_graph(n)
-    h = SceneGraph.load(g.save(tmp_path / "big.npz"))
+    h = load(g.save(tmp_path / "big.npz"))
     assert _signature(h) == _signature(g)
     bits = lambda x: math.copysign(1.0, x)  # noqa: E731 - tells -0.0 from 0.0
     for node in ("n0", "n1", "n7", f"n{n - 1}"):
@@ -533,8 +554,8 @@ def test_large_graph_round_trip_is_bit_exact(tmp_path: Path) -> None:
         assert a == b and bits(a["floor_z"]) == bits(b["floor_z"]) and type(b["k"]) is int
         assert [bits(x) for c in a["bbox"] for x in c] == [bits(x) for c in b["bbox"] for x in c]
         assert type(b["bbox"]) is tuple and type(b["bbox"][0]) is tuple
-    for key, log in g.provenance._pairs.items():
-        other = h.provenance._pairs[key]
+    for key, log in g.provenance.logs().items():
+        other = h.provenance.logs()[key]
         assert (log.alpha, log.beta) == (other.alpha, other.beta)
         assert [bits(e.d_alpha) for e in log.entries] == [bits(e.d_alpha) for e in other.entries]
     last = (n - 1) // 5 * 5  # an event on two pairs that compaction kept
@@ -545,8 +566,7 @@ def test_large_graph_round_trip_is_bit_exact(tmp_path: Path) -> None:
 
 
 def test_irregular_row_in_a_later_chunk(tmp_path: Path) -> None:
-    from sgbelief.graph.binary import _CHUNK
-
+    _CHUNK = CHUNK
     g = SceneGraph()
     for i in range(_CHUNK + 10):
         g.add_node(i, centroid=(float(i), 0.0, 1.0), vec=(1.0, float(i)))
@@ -562,18 +582,16 @@ def test_irregular_row_in_a_later_chunk(tmp_path: Path) -> None:
 
 
 def test_pylist_shares_only_bit_identical_values() -> None:
-    from sgbelief.graph.binary import _pylist
-
     x = np.zeros(10_000)
     x[::2] = -0.0
-    out = _pylist(x)
+    out = pylist(x)
     assert out == x.tolist() and [math.copysign(1, v) for v in out] == [math.copysign(1, v) for v in x.tolist()]
     assert len({id(v) for v in out}) == 2
     y = np.arange(10_000, dtype=np.int64) % 3
     y[4321] = 2**40  # a value the sample misses: plain tolist
-    assert _pylist(y) == y.tolist()
+    assert pylist(y) == y.tolist()
     r = np.random.default_rng(0).random(10_000)
-    assert _pylist(r) == r.tolist()
+    assert pylist(r) == r.tolist()
 
 
 def test_load_without_pending_entries_defers_every_entry(tmp_path: Path) -> None:
@@ -583,10 +601,51 @@ def test_load_without_pending_entries_defers_every_entry(tmp_path: Path) -> None
     for i in range(50):
         g.add_node(f"n{i}")
         g.provenance.commit(f"n{i}", "is_car", f"e{i}", i, 0.5 + i, 0.25)
-    h = SceneGraph.load(g.save(tmp_path / "g.npz"))
+    h = load_fast(g.save(tmp_path / "g.npz"))
     prov = h.provenance
-    assert prov.deferred and not prov.quarantine and prov._deferred._eid_arr is None  # type: ignore[union-attr]
+    assert prov.deferred and not prov.quarantine
+    assert not prov._deferred.columns.event_ids_split  # type: ignore[union-attr]
     assert prov.alpha_beta("n7", "is_car") == g.provenance.alpha_beta("n7", "is_car")
     assert prov.deferred  # reading a belief builds nothing
     assert [e.as_tuple() for e in prov.entries("n7", "is_car")] == [("e7", 7, 7.5, 0.25, "committed")]
     assert not prov.deferred and _signature(h) == _signature(g)
+
+
+_STORE_OPS = st.lists(st.one_of(
+    st.tuples(st.just("commit"), st.sampled_from(["a", "b"]), st.sampled_from(["is_car", "is_chair"]),
+              st.sampled_from(["x", "y", None, "e1", "e9"]), st.integers(0, 12), st.sampled_from([0.5, 1.0, 0.25]),
+              st.sampled_from([0.0, 0.5]), st.sampled_from([-1, 1])),
+    st.tuples(st.just("record"), st.sampled_from(["a", "b"]), st.sampled_from(["is_car"]), st.sampled_from(["x", "q"]),
+              st.integers(0, 12), st.just(1.0), st.just(0.5),
+              st.sampled_from([EntryStatus.REFUSED, EntryStatus.QUARANTINED, EntryStatus.COMMITTED]), st.just(1)),
+    st.tuples(st.just("transition"), st.integers(0, 3),
+              st.sampled_from([EntryStatus.COMMITTED, EntryStatus.RESOLVED, EntryStatus.RELEASED]), st.just(0.5)),
+    st.tuples(st.just("compact"), st.integers(0, 14)),
+    st.tuples(st.just("retract"), st.sampled_from(["x", "e1", "q"]), st.sampled_from([None, 3])),
+    st.tuples(st.just("read"), st.sampled_from(["a", "b"]), st.sampled_from(["is_car", "is_chair"])),
+    st.tuples(st.just("move"), st.sampled_from(["a", "b"]), st.sampled_from(["a", "b"])),
+    st.tuples(st.just("remove"), st.sampled_from(["a", "b"])),
+), max_size=30)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(before=_STORE_OPS, after=_STORE_OPS, remember=st.sampled_from([0, 3, 100]))
+def test_deferred_load_is_invisible(tmp_path_factory: pytest.TempPathFactory, before: list[tuple[Any, ...]],
+                                    after: list[tuple[Any, ...]], remember: int) -> None:
+    """A fast load defers its settled entries: the same calls on the deferred store, on one
+    materialised right after loading and on the reference loader's store return the same and
+    leave the same store."""
+    g = SceneGraph()
+    g.provenance.remember_compacted = remember
+    apply_store_operations(g.provenance, before)
+    for node in ("a", "b"):
+        if node not in g.nx:
+            g.add_node(node)
+    path = g.save(tmp_path_factory.mktemp("deferred") / "g.npz")
+    lazy, eager, ref = load_fast(path), load_fast(path), load_reference(path)
+    eager.provenance.materialize()
+    assert lazy.provenance.deferred == (eager.provenance.count_entries() > 0) and not ref.provenance.deferred
+    results = [apply_store_operations(h.provenance, after) for h in (lazy, eager, ref)]
+    assert results[0] == results[1] == results[2]
+    assert store_state(lazy.provenance) == store_state(eager.provenance) == store_state(ref.provenance)
+    assert not lazy.provenance.deferred

@@ -97,7 +97,7 @@ def test_import_cg_truncated_or_corrupt_map_is_a_clear_error(tmp_path: Path) -> 
 
 
 def test_query_into_a_closed_pipe_exits_quietly(tmp_path: Path) -> None:
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief import SceneGraph
 
     g = SceneGraph()
     for i in range(6000):

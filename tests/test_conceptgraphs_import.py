@@ -61,7 +61,7 @@ def test_import_saved_map_replays_every_detection(tmp_path, capsys, ali_dev):
     assert set(labels) == {"cg-0", "cg-1"}
     assert labels["cg-0"]["majority"] == "chair" and labels["cg-1"]["majority"] == "table"
     assert labels["cg-0"]["num_detections"] == 4
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief import SceneGraph
 
     g = SceneGraph.load(out / "graph.json")
     assert g.evidence_count() == 7  # 4 + 3 detections, each once

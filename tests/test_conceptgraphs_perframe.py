@@ -123,7 +123,7 @@ def test_labels_follow_the_beliefs_and_merges() -> None:
 
 def test_external_graph_evidence_is_still_read() -> None:
     from sgbelief.fusion.events import EvidenceEvent
-    from sgbelief.fusion.registry import make_operator
+    from sgbelief.api.operators import make_operator
     from sgbelief.graph.scene_graph import SceneGraph
 
     g = SceneGraph()

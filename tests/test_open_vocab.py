@@ -10,7 +10,7 @@ from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
 from sgbelief.cli import main as cli_main
 from sgbelief.errors import ConfigError, FormatError
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
-from sgbelief.fusion.open_vocab import LabelMapping, Taxonomy, load_class_list
+from sgbelief.fusion.open_vocab import LabelMapping, Taxonomy, derive_table, load_class_list
 
 CLASSES = ["chair", "armchair", "office chair", "table", "desk", "sofa", "tv", "lamp", "stool",
            "otherprop", "wall"]
@@ -18,7 +18,7 @@ CLASSES = ["chair", "armchair", "office chair", "table", "desk", "sofa", "tv", "
 
 @pytest.fixture
 def table() -> SubsumptionTable:
-    return SubsumptionTable.from_class_list(CLASSES, "indoor", ignore=["wall"])
+    return derive_table(CLASSES, "indoor", ignore=["wall"])
 
 
 def test_concrete_classes_exclude_each_other(table: SubsumptionTable) -> None:
@@ -51,7 +51,7 @@ def test_ambiguous_and_hypernym_labels(table: SubsumptionTable) -> None:
 
 
 def test_mapping_into_a_coarser_channel() -> None:
-    t = SubsumptionTable.from_class_list("scannet200", "indoor", "scannet200_nyu40", ignore=["wall", "floor", "ceiling"])
+    t = derive_table("scannet200", "indoor", "scannet200_nyu40", ignore=["wall", "floor", "ceiling"])
     assert t.outcome("is_tv", "television") == 1
     assert t.outcome("is_tv", "sofa") == 0
     assert t.outcome("is_chair", "chair") == 1  # every ScanNet200 class NYU40 calls chair is in is_chair
@@ -158,3 +158,21 @@ def test_vocab_check_cli(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> 
     bad.write_text("a\na\n")
     assert cli_main(["vocab", "check", str(bad)]) == 1
     assert "bad.txt:2" in capsys.readouterr().err
+
+
+def test_from_class_list_is_a_deprecated_derive_table(table: SubsumptionTable) -> None:
+    with pytest.warns(DeprecationWarning, match="derive_table"):
+        old = SubsumptionTable.from_class_list(CLASSES, "indoor", ignore=["wall"])
+    assert old.specs == table.specs and old.labels == table.labels and old.name == table.name
+    assert old.ambiguous_labels == table.ambiguous_labels and "otherprop" in old.ambiguous_labels
+
+
+def test_compatibility_does_not_import_the_derivation() -> None:
+    import subprocess
+    import sys
+
+    code = "import sys, sgbelief.fusion.compatibility; print('sgbelief.fusion.open_vocab' in sys.modules)"
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={"PYTHONPATH": str(root), "PATH": ""}).stdout.strip()
+    assert out == "False"

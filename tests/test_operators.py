@@ -15,7 +15,8 @@ from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.events import EvidenceEvent
 from sgbelief.fusion.protocol import Action, FusionOperator, UpdateReport
-from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator
+from sgbelief.api.operators import make_operator
+from sgbelief.fusion.registry import OPERATOR_NAMES
 from sgbelief.graph.provenance import EntryStatus
 from sgbelief.graph.scene_graph import SceneGraph
 from sgbelief.testing import check_fusion_operator, conformance_table
@@ -23,9 +24,10 @@ from sgbelief.testing import check_fusion_operator, conformance_table
 TABLE = conformance_table()
 
 
+@pytest.mark.parametrize("engine", ["fast", "reference"])
 @pytest.mark.parametrize("name", OPERATOR_NAMES)
-def test_every_operator_passes_the_conformance_suite(name: str) -> None:
-    check_fusion_operator(make_operator(name, None, TABLE))
+def test_every_operator_passes_the_conformance_suite(name: str, engine: str) -> None:
+    check_fusion_operator(make_operator(name, None, TABLE, engine=engine))
 
 
 def test_conformance_catches_an_update_many_that_differs_from_update() -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sgbelief.eval.batched import random_records
+from sgbelief.eval.random_stream import random_records
 from sgbelief.eval.replay import make_runs, to_event
 from sgbelief.fusion.calibration import MondrianCalibrator
 

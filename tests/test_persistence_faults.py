@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from sgbelief.errors import FormatError, SgbeliefError
 
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief import SceneGraph
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,4 +1,7 @@
-"""ProvenanceStore invariants: Eq. 5 reconstruction, exact retraction, compaction, cascades."""
+"""ProvenanceStore invariants: Eq. 4 reconstruction, exact retraction, compaction, cascades.
+
+Every test runs on the reference store and on the journalled store of sgbelief._fast (``Store``).
+"""
 
 from __future__ import annotations
 
@@ -8,8 +11,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sgbelief._fast.journal import JournalledProvenanceStore
 from sgbelief.errors import RetractionError
-from sgbelief.graph.provenance import COUNTED, EntryStatus, ProvenanceStore
+from sgbelief.graph.provenance import (
+    COUNTED,
+    EntryStatus,
+    ProvenanceEntry,
+    ProvenanceStore,
+    belief_from_entries,
+    fold_into_bucket,
+)
+
+STORES = [ProvenanceStore, JournalledProvenanceStore]
 
 NODES = ["a", "b", 7]
 PREDS = ["is_car", "is_chair"]
@@ -18,12 +31,15 @@ record = st.tuples(st.sampled_from(NODES), st.sampled_from(PREDS), increment, in
                    st.sampled_from([EntryStatus.COMMITTED, EntryStatus.REFUSED, EntryStatus.QUARANTINED]))
 
 
-def _build(records, skip=None):
-    store = ProvenanceStore()
+def _build(records, skip=None, store_cls=ProvenanceStore):
+    store = store_cls()
     for i, (node, pred, da, db, status) in enumerate(records):
         if i == skip:
             continue
-        store.record(node, pred, f"e{i}", i, da, db, status)
+        if status is EntryStatus.COMMITTED:
+            store.commit(node, pred, f"e{i}", i, da, db)
+        else:
+            store.record(node, pred, f"e{i}", i, da, db, status)
     return store
 
 
@@ -31,19 +47,19 @@ def _close(x: tuple[float, float], y: tuple[float, float]) -> bool:
     return all(math.isclose(p, q, rel_tol=1e-12, abs_tol=1e-12) for p, q in zip(x, y))
 
 
-@given(st.lists(record, max_size=60))
-def test_reconstruction_equals_stored_belief(records) -> None:
-    store = _build(records)
+@given(st.lists(record, max_size=60), st.sampled_from(STORES))
+def test_reconstruction_equals_stored_belief(records, store_cls) -> None:
+    store = _build(records, store_cls=store_cls)
     for node, pred in store.pairs():
         assert _close(store.alpha_beta(node, pred), store.reconstruct(node, pred))
         a, b = store.alpha_beta(node, pred)
         assert a >= 1.0 and b >= 1.0 and math.isfinite(a) and math.isfinite(b)
 
 
-@given(st.lists(record, min_size=1, max_size=60), st.data())
-def test_retraction_restores_the_stream_without_the_event(records, data) -> None:
+@given(st.lists(record, min_size=1, max_size=60), st.data(), st.sampled_from(STORES))
+def test_retraction_restores_the_stream_without_the_event(records, data, store_cls) -> None:
     i = data.draw(st.integers(0, len(records) - 1))
-    store = _build(records)
+    store = _build(records, store_cls=store_cls)
     store.retract(f"e{i}")
     ref = _build(records, skip=i)
     for node in NODES:
@@ -54,9 +70,9 @@ def test_retraction_restores_the_stream_without_the_event(records, data) -> None
         store.retract(f"e{i}")
 
 
-@given(st.lists(record, max_size=80), st.integers(0, 80))
-def test_compaction_preserves_beliefs_and_refuses_retraction(records, horizon) -> None:
-    store = _build(records)
+@given(st.lists(record, max_size=80), st.integers(0, 80), st.sampled_from(STORES))
+def test_compaction_preserves_beliefs_and_refuses_retraction(records, horizon, store_cls) -> None:
+    store = _build(records, store_cls=store_cls)
     before = {k: store.alpha_beta(*k) for k in store.pairs()}
     n_before = store.count_entries()
     store.compact(horizon)
@@ -71,8 +87,9 @@ def test_compaction_preserves_beliefs_and_refuses_retraction(records, horizon) -
             break
 
 
-def test_pending_entries_are_not_counted_until_transition() -> None:
-    s = ProvenanceStore()
+@pytest.mark.parametrize("store_cls", STORES)
+def test_pending_entries_are_not_counted_until_transition(store_cls) -> None:
+    s = store_cls()
     q = s.record("v", "is_car", "r", 0, 2.0, 0.5, EntryStatus.QUARANTINED, stance=1)
     assert s.alpha_beta("v", "is_car") == (1.0, 1.0)
     assert list(s.quarantine) == [q] and s.pending("v", "is_car") == [q]
@@ -82,8 +99,9 @@ def test_pending_entries_are_not_counted_until_transition() -> None:
     assert q.status in COUNTED
 
 
-def test_retracting_a_corroborated_revision_cascades() -> None:
-    s = ProvenanceStore()
+@pytest.mark.parametrize("store_cls", STORES)
+def test_retracting_a_corroborated_revision_cascades(store_cls) -> None:
+    s = store_cls()
     s.record("v", "p", "base", 0, 1.0, 0.0)
     r = s.record("v", "p", "rev", 1, 3.0, 0.0, EntryStatus.QUARANTINED, stance=1)
     s.record("v", "p", "cor", 2, 0.8, 0.2)
@@ -96,8 +114,9 @@ def test_retracting_a_corroborated_revision_cascades() -> None:
     assert s.has_event("late")
 
 
-def test_failed_cascade_changes_nothing() -> None:
-    s = ProvenanceStore()
+@pytest.mark.parametrize("store_cls", STORES)
+def test_failed_cascade_changes_nothing(store_cls) -> None:
+    s = store_cls()
     s.record("v", "p", "cor", 1, 0.5, 0.5)
     r = s.record("v", "p", "rev", 5, 3.0, 0.0, EntryStatus.COMMITTED, stance=1)
     r.corroborated_by = ["cor"]
@@ -108,8 +127,9 @@ def test_failed_cascade_changes_nothing() -> None:
     assert s.alpha_beta("v", "p") == before and s.has_event("rev")
 
 
-def test_move_node_migrates_everything_once() -> None:
-    s = ProvenanceStore()
+@pytest.mark.parametrize("store_cls", STORES)
+def test_move_node_migrates_everything_once(store_cls) -> None:
+    s = store_cls()
     s.record("keep", "p", "e1", 0, 1.0, 0.0)
     s.record("gone", "p", "e2", 1, 2.0, 1.0)
     s.record("gone", "q", "e3", 2, 0.0, 1.0, EntryStatus.REFUSED)
@@ -123,11 +143,12 @@ def test_move_node_migrates_everything_once() -> None:
 
 
 @settings(max_examples=30)
-@given(st.lists(record, max_size=40))
-def test_serialisation_round_trip(records) -> None:
-    s = _build(records)
+@given(st.lists(record, max_size=40), st.sampled_from(STORES))
+def test_serialisation_round_trip(records, store_cls) -> None:
+    s = _build(records, store_cls=store_cls)
     s.compact(len(records) // 2)
-    again = ProvenanceStore.from_dict(s.to_dict())
+    again = store_cls.from_dict(s.to_dict())
+    assert type(again) is store_cls and again.to_dict() == s.to_dict()
     for k in s.pairs():
         assert _close(again.alpha_beta(*k), s.alpha_beta(*k))
     assert len([e for e in again.quarantine if e.alive]) == len([e for e in s.quarantine if e.alive and e.status is EntryStatus.QUARANTINED])
@@ -140,7 +161,7 @@ for i in range(400):
     s.record(f"n{(i * 7) % 31}", ("is_car", "is_road", "is_pedestrian")[i % 3], f"e{i}", i // 4, 0.4, 0.6)
 s.compact(60)
 s.compact(95)
-print(",".join(s._compacted_order))
+print(",".join(s.compacted_ids()))
 """
 
 
@@ -160,22 +181,24 @@ def test_compaction_order_is_independent_of_hash_seed() -> None:
     assert len(ids) == 50 and ids[-1].startswith("e")
 
 
-def test_remembered_ids_are_bounded_and_resizable() -> None:
-    s = ProvenanceStore(remember_compacted=3)
+@pytest.mark.parametrize("store_cls", STORES)
+def test_remembered_ids_are_bounded_and_resizable(store_cls) -> None:
+    s = store_cls(remember_compacted=3)
     for i in range(10):
         s.record("v", "is_car", f"e{i}", i, 1.0, 0.0)
     s.compact(8)
-    assert list(s._compacted_order) == ["e5", "e6", "e7"]
+    assert s.compacted_ids() == ["e5", "e6", "e7"]
     assert s.is_compacted("e7") and not s.is_compacted("e1")
     s.remember_compacted = 2
-    assert list(s._compacted_order) == ["e6", "e7"]
+    assert s.compacted_ids() == ["e6", "e7"]
 
 
-def test_retracted_entry_does_not_hold_the_compaction_horizon_back() -> None:
+@pytest.mark.parametrize("store_cls", STORES)
+def test_retracted_entry_does_not_hold_the_compaction_horizon_back(store_cls) -> None:
     """An entry recorded after a later-stamped one that was retracted is folded once it is older
     than the horizon: the dead entry in the timeline does not stop the scan (and a loaded copy,
     which no longer holds it, folds the same entries)."""
-    store = ProvenanceStore()
+    store = store_cls()
     store.record("a", "is_car", "late", 5, 1.0, 0.0)
     store.record("a", "is_car", "early", 1, 2.0, 0.0)  # time goes back (replayed / merged logs)
     store.retract("late")
@@ -189,28 +212,31 @@ def test_retracted_entry_does_not_hold_the_compaction_horizon_back() -> None:
     assert store.compact(10) == 2
 
 
-_journal_ids = st.lists(st.sampled_from(["e0", "e1", "e2", "e3", "e4", None]), max_size=40)
+def _entry(t: int, da: float, db: float, status: EntryStatus = EntryStatus.COMMITTED, n: int = 1) -> ProvenanceEntry:
+    e = ProvenanceEntry(f"e{t}", t, da, db, status, "v", "p")
+    e.n_folded = n
+    return e
 
 
-@given(_journal_ids, st.data())
-def test_retired_ids_by_last_record_equal_the_count_down(ids, data) -> None:
-    """A compaction pass retires a journaled id at its last folded record. The pass over journal
-    records only finds the order from each id's last position; the general pass counts each id's
-    records down pair by pair. Both give the same ids in the same order."""
-    raws = [(("v", "is_car"), eid, 0, 1.0, 0.0, 1) for eid in ids]
-    cuts = sorted(data.draw(st.lists(st.integers(0, len(raws)), max_size=6)))
-    bounds = [0, *cuts, len(raws)]
-    groups = [raws[a:b] for a, b in zip(bounds, bounds[1:]) if b > a]
-    fast = ProvenanceStore._retired_ids([], [(0, g) for g in groups], raws, True)
-    assert len(set(fast)) == len(fast) and None not in fast
-    assert set(fast) == {i for i in ids if i is not None}
-    # the same pass where a first pair's materialised entries retired an id outside the journal,
-    # and a last pair with no journal record retired another: the general count-down
-    general = ProvenanceStore._retired_ids(["x", "z"], [(1, g) for g in groups], raws, True)
-    assert general == ["x", *fast, "z"]
-    # an id whose records are not all folded (a pair the pass skipped) is not retired
-    if groups:
-        kept = groups[:-1]
-        partial = ProvenanceStore._retired_ids(["x"], [(1, g) for g in kept], raws, False)
-        seen = [r[1] for g in kept for r in g]
-        assert partial == ["x", *[i for i in fast if i in seen and seen.count(i) == ids.count(i)]]
+def test_belief_from_entries_is_eq_4() -> None:
+    """Eq. 4: the prior plus the exactly rounded sums of the counted increments only."""
+    entries = [_entry(0, 0.1, 0.0), _entry(1, 0.2, 0.5, EntryStatus.RELEASED), _entry(2, 5.0, 5.0, EntryStatus.REFUSED),
+               _entry(3, 0.3, 0.25, EntryStatus.COMPACTED), _entry(4, 9.0, 9.0, EntryStatus.DISCARDED)]
+    assert belief_from_entries((1.0, 2.0), entries) == (1.0 + math.fsum([0.1, 0.2, 0.3]), 2.0 + 0.75)
+    assert belief_from_entries((1.0, 1.0), []) == (1.0, 1.0)
+
+
+@given(st.lists(st.tuples(st.integers(0, 9), increment, increment,
+                          st.sampled_from([EntryStatus.COMMITTED, EntryStatus.RESOLVED, EntryStatus.COMPACTED]),
+                          st.integers(1, 3)), min_size=1, max_size=12), st.booleans())
+def test_fold_into_bucket_keeps_eq_4(parts, with_bucket) -> None:
+    """Folding entries into a bucket leaves the belief they define unchanged (to rounding), counts
+    what they stood for, and takes their latest time."""
+    folded = [_entry(*p) for p in parts]
+    bucket = _entry(0, 1.0, 2.0, EntryStatus.COMPACTED, 4) if with_bucket else None
+    before = belief_from_entries((1.0, 1.0), folded + ([bucket] if bucket else []))
+    n_before = sum(e.n_folded for e in folded) + (bucket.n_folded if bucket else 0)
+    out = fold_into_bucket(bucket, folded, "v", "p")
+    assert out.status is EntryStatus.COMPACTED and (bucket is None or out is bucket)
+    assert _close(belief_from_entries((1.0, 1.0), [out]), before)
+    assert out.n_folded == n_before and out.t == max([e.t for e in folded] + ([0] if bucket else []))

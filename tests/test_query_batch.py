@@ -2,8 +2,8 @@
 
 ``QueryEngine.score_many`` (one literal at a time over the candidates) against ``score`` node by
 node; ``is_near_<class>`` (one ball query per scene) against ``neighbours_of_class``; the
-committed-label class mask read from the belief table against ``graph.probability`` node by node;
-the array build against a row-by-row reading of the attributes.
+committed-label class mask read in bulk against ``graph.probability`` node by node; the array
+build against a row-by-row reading of the attributes. A SceneGraph subclass is read as it answers.
 """
 
 from __future__ import annotations
@@ -25,15 +25,25 @@ BELIEFS = ["is_car", "is_pedestrian", "is_chair"]
 GEOMETRIC = ["is_near_pedestrian", "is_near_car", "is_stationary", "is_near_road_px", "is_workspace_height"]
 
 
-class PerNodeGraph(SceneGraph):
-    """A SceneGraph whose probability/node_attrs are overridden (same values): the engine and the
-    context must then ask node by node, which is the reference here."""
+class Inverted(SceneGraph):
+    """A SceneGraph subclass whose reads answer otherwise (1 - p, and a relabelled chair): the
+    engine and the context read it as it answers, in bulk and node by node alike."""
 
     def probability(self, node, predicate):  # noqa: ANN001, ANN201
-        return super().probability(node, predicate)
+        return 1.0 - super().probability(node, predicate)
+
+    def probabilities(self, nodes, predicate):  # noqa: ANN001, ANN201
+        return [1.0 - p for p in super().probabilities(nodes, predicate)]
 
     def node_attrs(self, node):  # noqa: ANN001, ANN201
-        return super().node_attrs(node)
+        return self._relabel(super().node_attrs(node))
+
+    def node_attr_table(self):  # noqa: ANN201
+        return {v: self._relabel(a) for v, a in super().node_attr_table().items()}
+
+    @staticmethod
+    def _relabel(attrs):  # noqa: ANN001, ANN205
+        return {**attrs, "label": "car"} if attrs.get("label") == "chair" else attrs
 
 
 def random_graph(seed: int, n: int, cls: type[SceneGraph] = SceneGraph) -> SceneGraph:
@@ -123,8 +133,8 @@ def test_score_many_is_score_node_by_node(seed: int, lits: list, tau: float, pru
     one_by_one = [m for m in (single.score(v, compound, kinds, prune=prune, tau=tau) for v in nodes) if m is not None]
     assert describe(one_by_one) == describe(want)
     assert batched._prob == single._prob and batched._geo == single._geo
-    # and through the public entry points, against a graph that forces the per-node reads
-    ref = QueryEngine(random_graph(seed, 60, PerNodeGraph), config=cfg)
+    # and through the public entry points, against an engine that reads node by node
+    ref = QueryEngine(g, config=cfg, probability=g.probability)
     for include_all in (False, True):
         a = batched.evaluate(compound, tau=tau, include_all=include_all)
         b = ref.evaluate(compound, tau=tau, include_all=include_all)
@@ -147,29 +157,72 @@ def test_is_near_is_any_neighbour(seed: int, distance: float) -> None:
             assert pred(ctx, v) == want
 
 
+def reference_class_mask(g: SceneGraph, cfg: RelationConfig, cls_name: str) -> np.ndarray:
+    """Node by node: the label is one of the class's, or a committed belief on is_<label>."""
+    wanted = cfg.labels_of(cls_name)
+    preds = [f"is_{c}" for c in sorted(wanted) if f"is_{c}" in set(g.predicates())]
+    return np.array([g.node_attrs(v).get("label") in wanted
+                     or (cfg.use_committed_labels and any(g.probability(v, p) > cfg.commit_tau for p in preds))
+                     for v in g.nodes()], dtype=bool)
+
+
 @pytest.mark.parametrize("commit_tau", [0.3, 0.5, 0.7])
-def test_committed_class_mask_reads_the_belief_table(commit_tau: float) -> None:
-    cfg = RelationConfig(commit_tau=commit_tau)
-    fast = GeometryContext(random_graph(3, 200), cfg)
-    slow = GeometryContext(random_graph(3, 200, PerNodeGraph), cfg)
-    assert fast._committed("is_car") is not None and slow._committed("is_car") is None
-    for cls_name in ("car", "pedestrian", "chair", "table"):
-        assert np.array_equal(fast.class_mask(cls_name), slow.class_mask(cls_name))
+@pytest.mark.parametrize("cls", [SceneGraph, Inverted])
+def test_committed_class_mask_is_the_per_node_definition(commit_tau: float, cls: type[SceneGraph]) -> None:
+    for use_committed in (True, False):
+        cfg = RelationConfig(commit_tau=commit_tau, use_committed_labels=use_committed)
+        g = random_graph(3, 200, cls)
+        ctx = GeometryContext(g, cfg)
+        for cls_name in ("car", "pedestrian", "chair", "table"):
+            assert np.array_equal(ctx.class_mask(cls_name), reference_class_mask(g, cfg, cls_name)), cls_name
+    if cls is Inverted:  # the subclass's answers are what the context reads
+        plain, inverted = random_graph(3, 200), random_graph(3, 200, Inverted)
+        assert not np.array_equal(GeometryContext(plain).class_mask("car"), GeometryContext(inverted).class_mask("car"))
 
 
-def test_arrays_match_a_row_by_row_reading() -> None:
+def reference_arrays(g: SceneGraph, cfg: RelationConfig) -> dict[str, object]:
+    """The context's arrays read row by row from ``node_attrs``: a bbox, else a centroid as a
+    degenerate box; the floor from ``floor_z``, else the median top of the scene's boxed 'floor'
+    objects, else its lowest box bottom."""
+    nodes = list(g.nodes())
+    lo = np.full((len(nodes), 3), np.nan)
+    hi = np.full((len(nodes), 3), np.nan)
+    attrs = [g.node_attrs(v) for v in nodes]
+    for i, a in enumerate(attrs):
+        if a.get("bbox") is not None:
+            lo[i], hi[i] = a["bbox"][0], a["bbox"][1]
+        elif a.get("centroid") is not None:
+            lo[i] = hi[i] = a["centroid"]
+    has_box = ~np.isnan(lo).any(axis=1)
+    labels = [None if a.get("label") is None else str(a["label"]) for a in attrs]
+    scenes = [a.get("scene") for a in attrs]
+    floor_z = np.array([np.nan if a.get("floor_z") is None else float(a["floor_z"]) for a in attrs])
+    for s in dict.fromkeys(scenes):
+        boxed = [i for i in range(len(nodes)) if scenes[i] == s and has_box[i]]
+        if not boxed:
+            continue
+        floors = [hi[i, 2] for i in boxed if labels[i] == "floor"]
+        fz = float(np.median(floors)) if floors else float(min(lo[i, 2] for i in boxed))
+        for i in range(len(nodes)):
+            if scenes[i] == s and np.isnan(floor_z[i]):
+                floor_z[i] = fz
+    structural = np.array([lab in cfg.structural_labels for lab in labels], dtype=bool)
+    return {"lo": lo, "hi": hi, "has_box": has_box, "structural": structural, "floor_z": floor_z,
+            "labels": labels, "scenes": scenes, "index": {v: i for i, v in enumerate(nodes)}}
+
+
+@pytest.mark.parametrize("cls", [SceneGraph, Inverted])
+def test_arrays_match_a_row_by_row_reading(cls: type[SceneGraph]) -> None:
     for seed in range(4):
-        fast = GeometryContext(random_graph(seed, 120), None)
-        slow = GeometryContext(random_graph(seed, 120, PerNodeGraph), None)
-        fast._build()
-        slow._build()
+        g = random_graph(seed, 120, cls)
+        ctx = GeometryContext(g, None)
+        ctx.build()
+        want = reference_arrays(g, ctx.config)
         for name in ("lo", "hi", "has_box", "structural", "floor_z"):
-            assert np.array_equal(getattr(fast, name), getattr(slow, name), equal_nan=True), name
-        assert fast.labels == slow.labels and fast.scenes == slow.scenes and fast.index == slow.index
-        assert fast.groups.keys() == slow.groups.keys()
-        assert all(np.array_equal(fast.groups[s], slow.groups[s]) for s in fast.groups)
+            assert np.array_equal(getattr(ctx, name), want[name], equal_nan=True), name
+        assert ctx.labels == want["labels"] and ctx.scenes == want["scenes"] and ctx.index == want["index"]
+        fast = ctx
         # groups: every node once, ascending within its scene, scenes in order of first appearance
-        g = random_graph(seed, 120)
         firsts = list(dict.fromkeys(g.node_attrs(v).get("scene") for v in g.nodes()))
         assert list(fast.groups) == firsts
         for s, ix in fast.groups.items():
@@ -186,7 +239,7 @@ def test_unusual_boxes_fall_back_to_numpy_rules() -> None:
     g.node_attrs("extra_row")["bbox"] = ((0, 0, 0), (1, 2, 3), (9, 9, 9))  # only the first two rows count
     g.node_attrs("cent")["centroid"] = np.array([4.0, 5.0, 6.0])
     ctx = GeometryContext(g)
-    ctx._build()
+    ctx.build()
     assert ctx.lo.tolist()[:4] == [[0, 0, 0], [0.5] * 3, [0, 0, 0], [4, 5, 6]]
     assert ctx.hi.tolist()[:4] == [[1, 1, 1], [2.0] * 3, [1, 2, 3], [4, 5, 6]]
     assert all(math.isnan(x) for x in ctx.lo[4]) and not ctx.has_box[4]
@@ -194,7 +247,7 @@ def test_unusual_boxes_fall_back_to_numpy_rules() -> None:
     bad.add_node("a")
     bad.node_attrs("a")["bbox"] = (("x", 0, 0), (1, 1, 1))
     with pytest.raises(ValueError):
-        GeometryContext(bad)._build()
+        GeometryContext(bad).build()
 
 
 def test_errors_are_those_of_the_per_node_reads() -> None:
@@ -208,3 +261,13 @@ def test_errors_are_those_of_the_per_node_reads() -> None:
     assert engine.belief_many("is_car", []) == []
     with pytest.raises(UnknownNodeError):
         QueryEngine(g).geometric_many("is_stationary", ["missing"])
+
+
+def test_a_subclass_is_read_as_it_answers() -> None:
+    g = random_graph(5, 80, Inverted)
+    compound = Compound((Literal("is_car", False), Literal("is_near_car", True)))
+    bulk = QueryEngine(g).evaluate(compound, include_all=True)
+    per_node = QueryEngine(g, probability=g.probability).evaluate(compound, include_all=True)
+    assert len(bulk) > 0 and describe(bulk) == describe(per_node)
+    for m in bulk:
+        assert m.components[0].value == g.probability(m.node, "is_car")

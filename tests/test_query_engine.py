@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pytest
 
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief import SceneGraph
 from sgbelief.query import P, QueryEngine, QueryPredicateError, run_query
 
 

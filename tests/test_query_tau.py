@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from sgbelief.cli import main
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief import SceneGraph
 from sgbelief.query import run_query
 
 

@@ -74,7 +74,7 @@ def test_is_near_committed_labels():
 
 def _commit(g, node, predicate):
     from sgbelief.fusion.events import EvidenceEvent
-    from sgbelief.fusion.registry import make_operator
+    from sgbelief.api.operators import make_operator
 
     op = make_operator("naive_bayes")
     for t in range(5):

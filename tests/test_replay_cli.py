@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from sgbelief.cli import main
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief import SceneGraph
 
 
 def _write_stream(d: Path, bad_line: str | None = None) -> tuple[Path, Path]:
@@ -101,7 +101,7 @@ def _replay_json(tmp_path: Path, ev: Path, truth: Path, engine: str, tag: str, *
 
 @pytest.mark.parametrize("engine", ["batched", "auto"])
 def test_batched_engine_gives_the_streaming_results(tmp_path: Path, engine: str) -> None:
-    from sgbelief.eval.batched import provenance_signature
+    from sgbelief.testing import provenance_signature
 
     bad = json.dumps({"t": 3, "targets": {"s/car": 1.0}, "predicate": "is_car", "confidence": 1.7, "context": "vlm", "geometric": {}})
     ev, truth = _write_stream(tmp_path, bad)  # a skipped line: default ids follow the file's line numbers
@@ -139,7 +139,7 @@ def test_batched_engine_needs_ordered_times_and_names_the_line(tmp_path: Path, c
 
 
 def test_which_runs_the_batched_engine_takes(monkeypatch: pytest.MonkeyPatch) -> None:
-    import sgbelief.eval.batched as batched
+    import sgbelief._fast.batched as batched
     from sgbelief.eval.formats import EventRecord
     from sgbelief.eval.replay import _batchable, make_runs, replay
     from sgbelief.fusion.compatibility import SubsumptionTable
@@ -148,7 +148,7 @@ def test_which_runs_the_batched_engine_takes(monkeypatch: pytest.MonkeyPatch) ->
     assert [_batchable(r) for r in runs] == [True, True, True, False, False, False]
     seen = []
     real = batched.batched_replay
-    monkeypatch.setattr(batched, "batched_replay", lambda cols, name, *a, **k: seen.append(name) or real(cols, name, *a, **k))
+    monkeypatch.setattr(batched, "batched_replay", lambda cols, op, *a, **k: seen.append(op.name) or real(cols, op, *a, **k))
     recs = [EventRecord(t, {"v": 1.0}, "is_car", 0.8, "vlm", {"v": "car"}) for t in range(30)]
     replay(recs, runs, engine="batched")
     assert seen == ["majority", "naive_bayes", "overwrite"]

@@ -10,7 +10,7 @@ import pytest
 from sgbelief.cli import main
 from sgbelief.eval.sim_config import load_sim_config
 from sgbelief.eval.simulate import simulate
-from sgbelief.query.retrieval import RetrievalSource, evaluate_retrieval, evaluate_sources
+from sgbelief.eval.retrieval import RetrievalSource, evaluate_retrieval, evaluate_sources
 
 OPERATORS = "majority,naive_bayes,comod"
 

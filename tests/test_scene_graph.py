@@ -1,4 +1,5 @@
-"""SceneGraph API, merges, and lossless atomic persistence with clear errors on bad files."""
+"""SceneGraph API, merges, and lossless atomic persistence with clear errors on bad files (through the
+public class's ``save`` / ``load``; the model class is tested in tests/test_api_scene_graph.py)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ import pytest
 
 from sgbelief.errors import FormatError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion.compatibility import SubsumptionTable
-from sgbelief.fusion.registry import make_operator
+from sgbelief.api.operators import make_operator
 from sgbelief.graph.provenance import EntryStatus
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief import SceneGraph
 from sgbelief.testing import conformance_table, random_stream
 from sgbelief.fusion.channel import FrameLabels
 
@@ -169,11 +170,18 @@ def test_probabilities_is_probability_per_node() -> None:
     with pytest.raises(UnknownNodeError):
         g.probabilities(["a", ["unhashable"]], "is_car")
 
-    class Shifted(SceneGraph):
-        def probability(self, node, predicate):  # noqa: ANN001, ANN201
-            return 1.0 - super().probability(node, predicate)
+    with pytest.raises(UnknownNodeError):
+        g.node_attrs(["unhashable"])  # type: ignore[arg-type]
 
-    h = Shifted()
-    h.add_node("a")
-    h.provenance.record("a", "is_car", "e1", 0, 2.0, 0.5)
-    assert h.probabilities(["a"], "is_car") == [h.probability("a", "is_car")]
+
+def test_bulk_reads_over_the_whole_map() -> None:
+    g = SceneGraph(vocabulary={"is_car"})
+    for n in ("a", "b", 7):
+        g.add_node(n, label=str(n))
+    g.provenance.record(7, "is_car", "e1", 0, 2.0, 0.5)
+    table = g.node_attr_table()
+    assert list(table) == g.nodes() and all(table[n] is g.node_attrs(n) for n in g.nodes())  # live dicts
+    assert g.probabilities(None, "is_car") == [g.probability(n, "is_car") for n in g.nodes()]
+    with pytest.raises(UnknownPredicateError):
+        g.probabilities(None, "is_boat")
+    assert SceneGraph().probabilities(None, "anything") == []  # no node: nothing is checked

@@ -12,14 +12,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from sgbelief.api.operators import make_operator
 from sgbelief.errors import UnknownPredicateError
-from sgbelief.eval.batched import provenance_signature
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.config import OperatorConfig
-from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator
+from sgbelief.fusion.registry import OPERATOR_NAMES
 from sgbelief.graph.persistence import graph_to_dict
 from sgbelief.graph.scene_graph import SceneGraph
-from sgbelief.testing import conformance_table, random_stream
+from sgbelief.eval.random_stream import random_records
+from sgbelief.testing import conformance_table, provenance_signature, random_stream
 
 TABLE = conformance_table()
 #: short horizons so that queues time out, revisions quarantine and compaction folds in a short stream
@@ -85,15 +86,23 @@ def test_a_rejected_event_leaves_the_events_before_it_applied(name: str) -> None
     assert _state(many, g_many, []) == _state(one, g_one, [])
 
 
-class _PerEvent:
-    """A user operator (not a BaseOperator): the streaming engine calls its ``update`` per event."""
+class _ProtocolOnly:
+    """A user operator written against the FusionOperator protocol alone (no BaseOperator):
+    every member hands on to a shipped operator."""
 
     def __init__(self, name: str) -> None:
         self.inner = make_operator(name, CONFIG, TABLE)
         self.name = f"plain-{name}"
 
-    def update(self, graph: SceneGraph, event: Any, channel: Any = None) -> Any:
-        return self.inner.update(graph, event, channel)
+    config = property(lambda self: self.inner.config)
+    stats = property(lambda self: self.inner.stats)
+    pair_rule = property(lambda self: self.inner.pair_rule)
+
+    def update(self, graph: SceneGraph, event: Any, channel: Any = None, *, report: bool = True) -> Any:
+        return self.inner.update(graph, event, channel, report=report)
+
+    def update_many(self, graph: SceneGraph, items: Any) -> Any:
+        return self.inner.update_many(graph, items)
 
     def tick(self, graph: SceneGraph, t: int) -> Any:
         return self.inner.tick(graph, t)
@@ -101,18 +110,20 @@ class _PerEvent:
     def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float:
         return self.inner.probability(graph, node, predicate)
 
+    def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
+        return self.inner.retract(graph, event_id)
+
 
 def test_streaming_replay_in_chunks_names_the_rejected_line(tmp_path: Any) -> None:
     """Across chunk boundaries: every run gets every record, and a record the operators reject is
-    reported with its own line and id (shipped operators through update_many, others per event)."""
+    reported with its own line and id (shipped and protocol-only operators alike)."""
     from sgbelief.errors import FormatError
-    from sgbelief.eval.batched import random_records
     from sgbelief.eval.formats import ReadStats, iter_events, write_events
     from sgbelief.eval.replay import STREAM_CHUNK, make_runs, replay, to_event
 
     n = 2 * STREAM_CHUNK + 37
     recs = random_records(1, n, n_nodes=8, predicates=tuple(TABLE.predicates), labels=("car", "person", None))
-    runs = make_runs(["majority", "comod"], TABLE, CONFIG) + make_runs([_PerEvent("cal")], TABLE, CONFIG)
+    runs = make_runs(["majority", "comod"], TABLE, CONFIG) + make_runs([_ProtocolOnly("cal")], TABLE, CONFIG)
     replay(recs, runs)
     assert [r.events for r in runs] == [n, n, n]
     for run, name in zip(runs, ("majority", "comod", "cal")):
@@ -123,7 +134,7 @@ def test_streaming_replay_in_chunks_names_the_rejected_line(tmp_path: Any) -> No
     bad = STREAM_CHUNK + 5
     path = tmp_path / "events.jsonl"
     write_events(path, recs[:bad] + [recs[bad]._replace(predicate="is_unicorn")] + recs[bad + 1:])
-    for ops in (["majority", "comod"], [_PerEvent("majority")]):
+    for ops in (["majority", "comod"], [_ProtocolOnly("majority")]):
         stats = ReadStats()
         with pytest.raises(FormatError, match=r"rejected by .*is_unicorn") as info:
             replay(iter_events(path, stats=stats), make_runs(ops, TABLE, CONFIG), line_of=stats, source=path)
@@ -131,54 +142,69 @@ def test_streaming_replay_in_chunks_names_the_rejected_line(tmp_path: Any) -> No
         assert repr(recs[bad].id) in str(info.value)
 
 
-@pytest.mark.parametrize("name", ["majority", "comod"])
-def test_a_subclass_that_overrides_update_gets_it_from_update_many_and_replay(name: str) -> None:
-    """update_many must not bypass a user's update(): it falls back to it, event by event."""
-    from sgbelief.eval.batched import random_records
+@pytest.mark.parametrize("engine", ["streaming", "batched"])
+def test_a_subclass_rule_is_what_every_path_applies(engine: str) -> None:
+    """A subclass changes the rule (``pair_rule``), not one of update / update_many: update,
+    update_many, the streaming replay and the batched engine all apply the subclass's rule."""
     from sgbelief.eval.replay import make_runs, replay
-    from sgbelief.fusion.registry import OPERATORS
+    from sgbelief.fusion.operators.baselines import MajorityVoteOperator
+    from sgbelief.fusion.protocol import LinearRule
 
-    class Counting(OPERATORS[name]):  # type: ignore[misc, valid-type]
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            self.calls = 0
+    class Flipped(LinearRule):
+        def split(self, c: Any) -> tuple[Any, Any]:
+            return 1.0 - c, c
 
-        def update(self, graph: SceneGraph, event: Any, channel: Any = None, *, report: bool = True) -> Any:
-            self.calls += 1
-            return super().update(graph, event, channel, report=report)
+    class Contrarian(MajorityVoteOperator):
+        name = "contrarian"
+        pair_rule = Flipped()
 
     items = _items(50, 2)
-    op, g = Counting(CONFIG, TABLE), SceneGraph()
-    op.update_many(g, items)
-    assert op.calls == 50
-    ref, g_ref = make_operator(name, CONFIG, TABLE), SceneGraph()
-    ref.update_many(g_ref, items)
-    assert _state(op, g, []) == _state(ref, g_ref, [])
+    one, g_one = Contrarian(CONFIG, TABLE), SceneGraph()
+    for ev, ch in items:
+        one.update(g_one, ev, ch)
+    many, g_many = Contrarian(CONFIG, TABLE), SceneGraph()
+    many.update_many(g_many, items)
+    assert _state(many, g_many, []) == _state(one, g_one, [])
+    majority, g_majority = make_operator("majority", CONFIG, TABLE), SceneGraph()
+    majority.update_many(g_majority, items)
+    assert provenance_signature(g_majority) != provenance_signature(g_many)
     recs = random_records(2, 600, n_nodes=6, predicates=tuple(TABLE.predicates), labels=("car", None))
-    run = make_runs([Counting(CONFIG, TABLE)], TABLE, CONFIG)[0]
-    replay(recs, [run])
-    assert run.operator.calls == 600  # type: ignore[attr-defined]
+    runs = make_runs([Contrarian(CONFIG, TABLE)], TABLE, CONFIG)
+    replay(recs, runs, engine=engine)
+    ref, g_ref = Contrarian(CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates)
+    ref.update_many(g_ref, [_to_event(r, i) for i, r in enumerate(recs)])
+    assert provenance_signature(runs[0].graph) == provenance_signature(g_ref)
+    assert runs[0].operator.stats == ref.stats
 
 
+def _to_event(rec: Any, i: int) -> Any:
+    from sgbelief.eval.replay import to_event
 
-def test_split_without_a_value_gives_the_clear_error() -> None:
-    """A rule whose ``_split`` gives no (p, q) for a claim and that has no ``_increment`` fails the
-    same way on every path (NotImplementedError naming the class), not with an unpacking error."""
+    return to_event(rec, f"line{i + 1}")
+
+
+def test_an_operator_without_a_rule_gives_the_clear_error() -> None:
+    """An operator with neither a pair_rule nor an _increment fails the same way on every path
+    and engine (NotImplementedError naming the class), leaving the events before applied."""
+    from sgbelief._fast.baselines import FUSED_BASELINES
     from sgbelief.fusion.events import EvidenceEvent
     from sgbelief.fusion.operators.base import BaseOperator
 
     class Partial(BaseOperator):
         name = "partial"
 
-        def _split(self, c: float):  # noqa: ANN202
-            return None if c < 0.3 else (c, 1.0 - c)
+        def _increment(self, graph, node, predicate, c, mass):  # noqa: ANN001, ANN202
+            if c < 0.3:
+                return super()._increment(graph, node, predicate, c, mass)
+            return mass * c, mass * (1.0 - c)
 
     ok = EvidenceEvent(targets={"a": 1.0}, predicate="is_car", confidence=0.9, t=0, id="e0")
     bad = EvidenceEvent(targets={"a": 1.0}, predicate="is_car", confidence=0.2, t=1, id="e1")
-    for run in (lambda op, g: op.update_many(g, [(ok, None), (bad, None)]),
-                lambda op, g: [op.update(g, e, None, report=False) for e in (ok, bad)],
-                lambda op, g: [op.update(g, e, None) for e in (ok, bad)]):
-        op, g = Partial(), SceneGraph()
-        with pytest.raises(NotImplementedError, match="Partial"):
-            run(op, g)
-        assert g.provenance.alpha_beta("a", "is_car") == (1.9, 1.1) and op.stats["events"] == 1
+    for engine in (None, FUSED_BASELINES):
+        for run in (lambda op, g: op.update_many(g, [(ok, None), (bad, None)]),
+                    lambda op, g: [op.update(g, e, None, report=False) for e in (ok, bad)],
+                    lambda op, g: [op.update(g, e, None) for e in (ok, bad)]):
+            op, g = Partial(engine=engine), SceneGraph()
+            with pytest.raises(NotImplementedError, match="Partial"):
+                run(op, g)
+            assert g.provenance.alpha_beta("a", "is_car") == (1.9, 1.1) and op.stats["events"] == 1

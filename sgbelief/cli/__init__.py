@@ -20,7 +20,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "retrieval": ("sgbelief.cli.retrieval", "compound-query retrieval F1 per operator"),
     "import-cg": ("sgbelief.cli.import_cg", "import a saved ConceptGraphs map and replay its detections"),
     "inspect": ("sgbelief.cli.inspect", "show a saved graph's beliefs and provenance"),
+    "explain": ("sgbelief.cli.explain", "a belief's story: every event of a (node, predicate), and why it is committed"),
     "vocab": ("sgbelief.cli.vocab", "check an open-vocabulary class list: what contradicts what"),
+    "show": ("sgbelief.cli.show", "draw a saved map top-down (PNG), or one element's belief trace"),
+    "record": ("sgbelief.cli.record", "replay an evidence log into a rerun recording (.rrd; sgbelief[rerun])"),
 }
 
 
@@ -52,8 +55,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=f"sgbelief {name}", description=COMMANDS[name][1])
     module.add_arguments(parser)
     args = parser.parse_args(rest)
+    from sgbelief.cli._console import route_messages, unroute_messages
     from sgbelief.errors import SgbeliefError
 
+    handler = route_messages(name)
     try:
         rc = int(module.run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit flush
@@ -68,6 +73,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except FileNotFoundError as exc:
         print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
         return 1
+    finally:
+        unroute_messages(handler)
 
 
 def _silence_stdout() -> None:

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
+from sgbelief.cli import _console as console
 from sgbelief.fusion.registry import OPERATOR_NAMES
 
 
@@ -62,8 +62,6 @@ def parse_seeds(text: str) -> list[int]:
 def run_grid_command(args: argparse.Namespace) -> int:
     import json
 
-    from tqdm import tqdm
-
     from sgbelief.eval.grid import grid_cells, render_grid, run_grid, summarize
     from sgbelief.fusion.config import OperatorConfig
     from sgbelief.graph.persistence import atomic_write_text
@@ -73,7 +71,7 @@ def run_grid_command(args: argparse.Namespace) -> int:
     config = OperatorConfig.from_yaml(args.config) if args.config else OperatorConfig.default()
     cells = grid_cells(suites)
     n_jobs = len(suites) * 3 * len(seeds)
-    bar = tqdm(total=n_jobs, desc="grid", unit="sim", file=sys.stderr, disable=args.quiet or not sys.stderr.isatty())
+    bar = console.progress(n_jobs, desc="grid", unit="sim", quiet=args.quiet)
 
     def progress(msg: str) -> None:
         bar.set_postfix_str(msg[:60])
@@ -98,8 +96,6 @@ def run_grid_command(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     if args.grid:
         return run_grid_command(args)
-    from tqdm import tqdm
-
     from sgbelief.eval.benchmark import run_bench
     from sgbelief.fusion.config import OperatorConfig
 
@@ -107,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     config = OperatorConfig.from_yaml(args.config) if args.config else OperatorConfig.default()
     ops = [o.strip() for o in args.operators.split(",") if o.strip()]
     steps = 7 * len(suites) + (0 if args.no_real else 1) + 1
-    bar = tqdm(total=steps, desc="bench", unit="step", file=sys.stderr, disable=args.quiet)
+    bar = console.progress(steps, desc="bench", unit="step", quiet=args.quiet)
 
     def progress(msg: str) -> None:
         bar.set_postfix_str(msg[:60])

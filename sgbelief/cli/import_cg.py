@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from sgbelief.cli import _console as console
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("result", help="ConceptGraphs map (pcd_saves/full_pcd_*.pkl.gz or pcd_*.pkl.gz)")
@@ -38,7 +40,12 @@ def run(args: argparse.Namespace) -> int:
         channel = scannet_mesh_channel(args.channel, first_pose=first)
     backend = ConceptGraphsBackend(args.operator, vocabulary=args.vocab, context=args.context,
                                    operator_config=args.operator_config, channel=channel)
-    summary = import_file(args.result, backend)
+    with console.progress(desc="import-cg", unit="det") as bar:
+        def advance(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+        summary = import_file(args.result, backend, progress=advance)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     graph_path = backend.graph.save(out / f"graph.{args.graph_format}")

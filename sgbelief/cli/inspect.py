@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sgbelief.errors import UnknownNodeError
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.api.scene_graph import SceneGraph
 
     g = SceneGraph.load(args.map_dir)
     if args.node is None:

@@ -28,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.api.scene_graph import SceneGraph
     from sgbelief.query import run_query
 
     if not 0.0 <= args.tau <= 1.0:

@@ -12,6 +12,8 @@ import json
 import sys
 from pathlib import Path
 
+from sgbelief.cli import _console as console
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     src = parser.add_argument_group("source (one of)")
@@ -44,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sgbelief.query.retrieval import RetrievalSource, evaluate_retrieval, evaluate_sources, format_scores
+    from sgbelief.eval.retrieval import RetrievalSource, evaluate_retrieval, evaluate_sources, format_scores
 
     if bool(args.scenes) == bool(args.suite):
         print("sgbelief retrieval: error: give either --scenes (with --events) or --suite", file=sys.stderr)
@@ -67,10 +69,12 @@ def run(args: argparse.Namespace) -> int:
                                    workers=args.workers, executor=args.executor)
     else:
         results = []
-        for src in sources:
-            data = src.load()
-            results.append((data.name, evaluate_retrieval(data, operators, tau=args.tau,
-                                                          operator_config=args.operator_config)))
+        with console.progress(len(sources) * len(operators), desc="retrieval", unit="run") as bar:
+            for src in sources:
+                data = src.load()
+                results.append((data.name, evaluate_retrieval(data, operators, tau=args.tau,
+                                                              operator_config=args.operator_config,
+                                                              progress=lambda _name: bar.update(1))))
     report = []
     for name, scores in results:
         report.append({"source": name, "tau": args.tau, "scores": [s.to_dict() for s in scores]})

@@ -51,7 +51,9 @@ def _table(args: argparse.Namespace):  # noqa: ANN202
         if not (config_dir() / "vocab" / "classes" / f"{args.vocab}.txt").exists() and \
                 (config_dir() / "vocab" / f"{args.vocab}.yaml").exists():
             return SubsumptionTable.shipped(args.vocab)  # a hand-written shipped table (scannet, kitti360)
-    return SubsumptionTable.from_class_list(args.vocab, args.taxonomy, args.mapping, ignore=ignore)
+    from sgbelief.fusion.open_vocab import derive_table
+
+    return derive_table(args.vocab, args.taxonomy, args.mapping, ignore=ignore)
 
 
 def run(args: argparse.Namespace) -> int:

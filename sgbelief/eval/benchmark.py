@@ -29,16 +29,18 @@ from typing import Any
 
 import numpy as np
 
+from sgbelief.api.operators import make_operator
 from sgbelief.eval.formats import EventRecord
 from sgbelief.eval.metrics import conformal_coverage, reliability_bins
 from sgbelief.eval.replay import OperatorRun, OperatorScores, make_runs, replay, score_run, to_event
 from sgbelief.fusion.calibration import MondrianCalibrator
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
-from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES, make_operator
+from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES
 from sgbelief.graph.belief import BetaBelief
 from sgbelief.graph.persistence import atomic_write_text
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.api.scene_graph import SceneGraph
+from sgbelief.viz.trace_figure import draw_belief_band
 
 
 @dataclass(frozen=True)
@@ -62,10 +64,11 @@ def _noop(_: str) -> None:
 
 
 # ----------------------------------------------------------------------------- replays
-def _run(
+def score_operators(
     events: Sequence[EventRecord], operators: Sequence[str], table: SubsumptionTable, truth: dict, preds: Sequence[str],
     config: OperatorConfig,
 ) -> dict[str, OperatorScores]:
+    """Each operator's scores on ``events`` (one replay; the grid scores its cells with this)."""
     return _replay(events, operators, table, truth, preds, config)[0]
 
 
@@ -281,8 +284,7 @@ def make_figures(results: dict[str, Any], out: Path, real: dict[str, Any], sim_c
         truth = tr.get("truth", 0)
         for name, color in _TRACE_COLOURS.items():
             arr = np.array(tr["trace"][name])
-            axes[0].plot(arr[:, 0], arr[:, 1], color=color, label=f"{name}: mean")
-            axes[0].fill_between(arr[:, 0], arr[:, 2], arr[:, 3], color=color, alpha=0.2, label=f"{name}: 90% interval")
+            draw_belief_band(axes[0], arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3], colour=color, name=name)
         for k in tr["contradictions"]:
             axes[0].axvline(k, color="0.85", lw=0.6, zorder=0)
         axes[0].axhline(0.5, color="0.5", ls=":", lw=1)
@@ -426,7 +428,7 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
     res["belief_preservation_pool"] = len(pool)
     cal_report = trace = None
     progress(f"{name}: six operators, vlm_a + segmenter channel")
-    seg = _run(suite.events_for("vlm_a", "segmenter"), operators + paper, table, suite.truth, preds, config)
+    seg = score_operators(suite.events_for("vlm_a", "segmenter"), operators + paper, table, suite.truth, preds, config)
     res["table2_segmenter"] = _scores_dict(seg)
     if "comod" in operators:
         res["table5"] = {"oracle": main["comod"].as_dict(), "segmenter": seg["comod"].as_dict(),
@@ -448,7 +450,7 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
     if job.retrieval:
         progress(f"{name}: compound-query retrieval")
         try:
-            from sgbelief.query.retrieval import evaluate_retrieval, suite_retrieval_data
+            from sgbelief.eval.retrieval import evaluate_retrieval, suite_retrieval_data
 
             rdata = suite_retrieval_data(data_dir, spec.vocab)
             res["retrieval"] = [sc.to_dict() for sc in evaluate_retrieval(rdata, operators, operator_config=config)]

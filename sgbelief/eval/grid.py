@@ -70,7 +70,7 @@ class _Job:
 
 def _run_job(job: _Job) -> list[dict[str, Any]]:
     """Simulate one (suite, seed, source) and score every operator on each (profile, channel) view."""
-    from sgbelief.eval.benchmark import SUITES, _run
+    from sgbelief.eval.benchmark import SUITES, score_operators
     from sgbelief.eval.sim_config import load_sim_config
     from sgbelief.eval.simulate import simulate
     from sgbelief.fusion.compatibility import SubsumptionTable
@@ -88,7 +88,7 @@ def _run_job(job: _Job) -> list[dict[str, Any]]:
     config = OperatorConfig.from_mapping(job.config)
     rows = []
     for profile, channel in itertools.product(job.profiles, job.channels):
-        scores = _run(suite.events_for(profile, channel), list(job.operators), table, suite.truth, preds, config)
+        scores = score_operators(suite.events_for(profile, channel), list(job.operators), table, suite.truth, preds, config)
         for op, sc in scores.items():
             rows.append({
                 "suite": job.suite, "seed": job.seed, "profile": profile, "source": job.source, "channel": channel,

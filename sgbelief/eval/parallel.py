@@ -101,7 +101,7 @@ def _run_ray(fn: Callable[[T], R], seq: Sequence[T], workers: int, address: str 
 def random_scene_summary(seed: int, n_events: int = 150, operators: Sequence[str] = ("majority", "comod")) -> dict[str, Any]:
     """A small deterministic scene (seeded random stream through ``operators``): end beliefs and
     stats. Importable everywhere, so it serves as the executor self-test on a cluster."""
-    from sgbelief.eval.batched import random_records
+    from sgbelief.eval.random_stream import random_records
     from sgbelief.eval.replay import make_runs, replay
 
     runs = make_runs(list(operators), None)

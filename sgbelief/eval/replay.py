@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sgbelief._fast.gc import relaxed_gc
+from sgbelief.api.operators import make_operator
 from sgbelief.errors import FormatError, SgbeliefError, UnknownPredicateError
 from sgbelief.eval.formats import EventRecord, ReadStats, iter_events
 from sgbelief.eval.metrics import SetScores, brier_over_pairs, mean_iou, per_predicate_scores
@@ -21,11 +23,9 @@ from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.events import EvidenceEvent
-from sgbelief.fusion.operators.base import BaseOperator
 from sgbelief.fusion.protocol import FusionOperator
-from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator
-from sgbelief.gc_tuning import relaxed_gc
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.api.scene_graph import SceneGraph
+from sgbelief.fusion.registry import OPERATOR_NAMES
 
 
 @dataclass
@@ -99,14 +99,11 @@ ENGINES = ("streaming", "batched", "auto")
 
 
 def _batchable(run: OperatorRun) -> bool:
-    """A shipped count-based baseline on a fresh graph: the batched engine gives its exact result."""
-    from sgbelief.eval.batched import BATCHED_OPERATORS
-    from sgbelief.fusion.operators.baselines import MajorityVoteOperator, NaiveBayesOperator, OverwriteOperator
-
+    """An operator that declares a pair rule (``pair_rule``), on a fresh graph: the batched engine
+    gives its exact result."""
     g = run.graph
     return (
-        type(run.operator) in (MajorityVoteOperator, NaiveBayesOperator, OverwriteOperator)
-        and run.operator.name in BATCHED_OPERATORS
+        run.operator.pair_rule is not None
         and run.events == 0
         and not len(g.nx) and not len(g.provenance) and g.clock == -1 and not g.meta
     )
@@ -123,9 +120,9 @@ def replay(
 ) -> list[OperatorRun]:
     """Apply every record to every run; errors name the line (from ``line_of.lines``) when known.
 
-    ``engine``: ``streaming`` (event by event, records read incrementally), ``batched`` (the
-    majority / naive_bayes / overwrite runs go through :func:`sgbelief.eval.batched.batched_replay`,
-    bit-identical and faster (README's performance table has the measured figures); the other runs stream; records are held in memory; event times
+    ``engine``: ``streaming`` (event by event, records read incrementally), ``batched`` (the runs
+    whose operator declares a pair rule, e.g. majority / naive_bayes / overwrite, go through
+    :func:`sgbelief._fast.batched.batched_replay`, bit-identical and faster (README's performance table has the measured figures); the other runs stream; records are held in memory; event times
     must not decrease) or ``auto`` (batched when the stream allows it, streaming otherwise). In every engine event times must not
     decrease: a log whose t goes back is rejected, naming the line.
     """
@@ -175,14 +172,13 @@ def _time_goes_back(before: int, after: int) -> str:
 def _stream(records: Iterable[EventRecord], runs: Sequence[OperatorRun], line_of: Any, source: object,
             progress: Any) -> list[OperatorRun]:
     """The streaming engine: every record to every run, in order. Records are read a chunk at a
-    time; each run applies the chunk event by event (the shipped operators through
-    ``update_many``, which skips the per-target reports replay discards; other operators through
-    ``update``). Runs are independent, so the result is that of feeding each record to every run."""
+    time; each run applies the chunk through its operator's ``update_many`` (which skips the
+    per-target reports replay discards). Runs are independent, so the result is that of feeding
+    each record to every run."""
     perf = time.perf_counter
     n = 0
     last_t = -1
     advance = line_of.advance if isinstance(line_of, _Lines) else None
-    many = [isinstance(run.operator, BaseOperator) for run in runs]
     it = iter(records)
     with relaxed_gc():
         while True:
@@ -200,19 +196,14 @@ def _stream(records: Iterable[EventRecord], runs: Sequence[OperatorRun], line_of
                 lines.append(line)
             if not chunk:
                 break
-            for run, fast in zip(runs, many):
+            for run in runs:
                 op = run.operator
                 t0 = perf()
-                done = op.stats["events"] if fast else 0  # type: ignore[attr-defined]
+                done = op.stats["events"]
                 try:
-                    if fast:
-                        op.update_many(run.graph, chunk)  # type: ignore[attr-defined]
-                    else:
-                        for ev, labels in chunk:
-                            op.update(run.graph, ev, labels)
-                            done += 1
+                    op.update_many(run.graph, chunk)
                 except SgbeliefError as exc:
-                    i = op.stats["events"] - done if fast else done  # type: ignore[attr-defined]
+                    i = op.stats["events"] - done  # the events before the rejected one stay applied
                     raise FormatError(f"event {chunk[i][0].id!r} rejected by {run.name}: {exc}", path=source,
                                       line=lines[i]) from exc
                 run.seconds += perf() - t0
@@ -223,8 +214,8 @@ def _stream(records: Iterable[EventRecord], runs: Sequence[OperatorRun], line_of
 
 
 def _waves(recs: list[EventRecord], lines: list[int], runs: Sequence[OperatorRun], source: object) -> None:
-    """The batched engine for the count-based baselines; each run's time includes columnarisation."""
-    from sgbelief.eval.batched import EventColumns, batched_replay
+    """The batched engine for the runs with a pair rule; each run's time includes columnarisation."""
+    from sgbelief._fast.batched import EventColumns, batched_replay
 
     if any(r.graph.vocabulary is not None for r in runs):
         for rec, line in zip(recs, lines):
@@ -239,10 +230,9 @@ def _waves(recs: list[EventRecord], lines: list[int], runs: Sequence[OperatorRun
     t_cols = time.perf_counter() - t0
     for run in runs:
         t0 = time.perf_counter()
-        _, stats = batched_replay(cols, run.operator.name, None, run.operator.config, graph=run.graph)
+        batched_replay(cols, run.operator, graph=run.graph)  # counts into run.operator.stats
         run.seconds += t_cols + time.perf_counter() - t0
         run.events += len(recs)
-        run.operator.stats.update(stats)
 
 
 def require_events(stats: ReadStats, source: object) -> None:
@@ -287,7 +277,7 @@ def score_run(
     probs = graph_probabilities(run.graph, truth)
     per = per_predicate_scores(probs, truth, preds, tau=tau)
     brier = brier_over_pairs(probs, truth, [k for k in run.graph.provenance.pairs() if k[1] in preds])
-    stats = dict(getattr(run.operator, "stats", {}) or {})
+    stats = dict(run.operator.stats)
     return OperatorScores(
         per_predicate=per,
         mean_iou=mean_iou(per),
@@ -368,7 +358,7 @@ def replay_scene(job: SceneJob) -> SceneResult:
             r.graph.save(Path(job.save_graph) / r.name / Path(job.events).parent.name, format=job.graph_format)
     return SceneResult(
         job.events, stats.events, stats.skipped, probs, pairs,
-        {r.name: dict(getattr(r.operator, "stats", {})) for r in runs}, {r.name: r.seconds for r in runs},
+        {r.name: dict(r.operator.stats) for r in runs}, {r.name: r.seconds for r in runs},
     )
 
 

@@ -1,8 +1,15 @@
-"""The compatibility predicate compat(phi_f, phi_g) in {T, ⊥, ∅} from a subsumption table (§4.2)."""
+"""The compatibility predicate compat(phi_f, phi_g) in {T, ⊥, ∅} from a subsumption table (§4.2).
+
+A table is written by hand (``configs/vocab/*.yaml``, :meth:`SubsumptionTable.from_yaml`) or derived
+from a detector class list by :func:`sgbelief.fusion.open_vocab.derive_table`, which builds it from
+this module's types (:meth:`SubsumptionTable.from_specs`); this module does not know that one.
+"""
 
 from __future__ import annotations
 
+import importlib
 import re
+import warnings
 from collections.abc import Iterable, Mapping
 from enum import Enum
 from pathlib import Path
@@ -30,6 +37,9 @@ def normalise_class_name(name: str) -> str:
     """'Office Chair' -> 'office_chair' (lower case, runs of non-alphanumerics to '_')."""
     return re.sub(r"[^0-9a-z]+", "_", name.strip().lower()).strip("_")
 
+
+#: where the deprecated ``SubsumptionTable.from_class_list`` lives now (module, name)
+_FROM_CLASS_LIST_HOME = ("sgbelief.fusion.open_vocab", "derive_table")
 
 VOCABULARY_FORMAT = "sgbelief.vocabulary"
 VOCABULARY_VERSION = 1
@@ -109,12 +119,12 @@ class SubsumptionTable:
             raise ConfigError(_pydantic_message(exc, "vocabulary")) from exc
         self._init(parsed)
 
-    def _init(self, parsed: VocabularyFile) -> None:
+    def _init(self, parsed: VocabularyFile, ambiguous_labels: Iterable[str] = ()) -> None:
         self.name = parsed.name
         self.specs: dict[str, PredicateSpec] = dict(parsed.predicates)
         self.labels: frozenset[str] | None = frozenset(parsed.labels) if parsed.labels else None
         #: labels that decide nothing for any predicate (open-vocabulary tables: otherprop, object, ...)
-        self.ambiguous_labels: frozenset[str] = frozenset()
+        self.ambiguous_labels: frozenset[str] = frozenset(ambiguous_labels)
         self._outcomes: dict[str, dict[str, int]] = {}
         self._alias: dict[str, str] = {}
         for pred, spec in self.specs.items():
@@ -152,25 +162,27 @@ class SubsumptionTable:
         return table
 
     @classmethod
-    def _from_specs(cls, specs: Mapping[str, PredicateSpec], *, name: str, labels: Iterable[str]) -> SubsumptionTable:
-        """A table from already-validated specs (the open-vocabulary derivation), no re-validation."""
+    def from_specs(cls, specs: Mapping[str, PredicateSpec], *, name: str, labels: Iterable[str],
+                   ambiguous_labels: Iterable[str] = ()) -> SubsumptionTable:
+        """A table from specs that are valid by construction (a derivation such as
+        :func:`sgbelief.fusion.open_vocab.derive_table`): no re-validation. ``ambiguous_labels``:
+        channel labels that decide nothing for any predicate."""
         table = cls.__new__(cls)
         table._init(VocabularyFile.model_construct(format="sgbelief.vocabulary", version=1, name=name,
-                                                   labels=list(labels), predicates=dict(specs)))
+                                                   labels=list(labels), predicates=dict(specs)),
+                    ambiguous_labels)
         return table
 
     @classmethod
     def from_class_list(cls, classes: Any, taxonomy: Any = "indoor", mapping: Any = None, *,
                         ignore: Iterable[str] = (), name: str | None = None) -> SubsumptionTable:
-        """Derive a table from a detector class list, a taxonomy and an optional label mapping.
-
-        Concrete classes are mutually exclusive; taxonomy groups (synonyms, hyponyms) share a
-        predicate; hypernym labels corroborate only predicates covering all their classes;
-        ambiguous labels decide nothing. See :mod:`sgbelief.fusion.open_vocab`.
-        """
-        from sgbelief.fusion.open_vocab import derive_table
-
-        return derive_table(classes, taxonomy, mapping, ignore=ignore, name=name)
+        """Deprecated: :func:`sgbelief.fusion.open_vocab.derive_table` (same arguments), which
+        derives a table from a detector class list, a taxonomy and an optional label mapping."""
+        home, name_there = _FROM_CLASS_LIST_HOME
+        warnings.warn(f"SubsumptionTable.from_class_list is deprecated; use {home}.{name_there}",
+                      DeprecationWarning, stacklevel=2)
+        derive = getattr(importlib.import_module(home), name_there)  # a deprecated alias: no import arrow
+        return derive(classes, taxonomy, mapping, ignore=ignore, name=name)  # type: ignore[no-any-return]
 
     @classmethod
     def shipped(cls, name: str) -> SubsumptionTable:

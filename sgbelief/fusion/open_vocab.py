@@ -367,9 +367,8 @@ def derive_table(
         aliases = [display[k] for k in sorted(ext)]
         specs[pred] = PredicateSpec.model_construct(positive=pos, negative=neg, aliases=aliases)
     table_name = name or (f"{cl.name}->{mp.target}" if mp is not None else cl.name)
-    table = SubsumptionTable._from_specs(specs, name=table_name, labels=list(labels))
-    table.ambiguous_labels = frozenset(lab for lab, e in labels.items() if e is None)
-    return table
+    return SubsumptionTable.from_specs(specs, name=table_name, labels=list(labels),
+                                       ambiguous_labels=[lab for lab, e in labels.items() if e is None])
 
 
 def verdict_matrix(table: SubsumptionTable, labels: Sequence[str] | None = None) -> tuple[list[str], list[str], list[list[str]]]:

@@ -1,8 +1,10 @@
-"""The FusionOperator protocol every operator implements, and its report types."""
+"""The FusionOperator protocol every operator implements: its report types, its counters and the
+pair-local rules an operator may declare (what the batched engine applies in waves)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Iterable
 from enum import Enum
 from functools import partial
 from typing import TYPE_CHECKING, Any, NamedTuple, Protocol, runtime_checkable
@@ -11,6 +13,7 @@ from sgbelief.fusion.compatibility import Verdict
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
+    from sgbelief.fusion.config import OperatorConfig
     from sgbelief.fusion.events import EvidenceEvent
     from sgbelief.graph.scene_graph import SceneGraph
 
@@ -70,23 +73,114 @@ class UpdateReport(NamedTuple):
 make_report: Callable[[tuple[str, int, str, tuple[TargetOutcome, ...], tuple[QueueResolution, ...]]], UpdateReport]
 make_report = partial(tuple.__new__, UpdateReport)  # type: ignore[assignment]
 
+#: (event, geometric channel) pairs, in stream order: what ``update_many`` applies
+Items = Iterable[tuple["EvidenceEvent", "GeometricChannel | None"]]
 
+#: the counters every operator's ``stats`` holds (queue resolutions may add ``confirmed`` and
+#: ``dismissed``): events applied, targets seen, what happened to them, queue exits, entries compacted
+STAT_KEYS: tuple[str, ...] = (
+    "events", "targets", "committed", "refused", "quarantined", "released", "corroborated", "discarded",
+    "resolved", "expired", "below_tau_t", "compacted",
+)
+
+
+def new_stats() -> dict[str, int]:
+    """Every counter of :data:`STAT_KEYS` at zero."""
+    return dict.fromkeys(STAT_KEYS, 0)
+
+
+def increment_stance(d_alpha: Any, d_beta: Any) -> Any:
+    """The stance of committed increments: +1 when they favour phi (d_alpha > d_beta), -1 when they
+    favour not-phi, 0 when neutral. Floats give an int, float arrays an int array."""
+    return (d_alpha > d_beta) * 1 - (d_alpha < d_beta) * 1
+
+
+# ----------------------------------------------------------------------------- pair-local rules
+class LinearRule(ABC):
+    """A rule linear in the targeting mass, whatever the belief (Eq. 4 with w = T(v))::
+
+        (p, q) = split(c),   d_alpha = T(v) p,   d_beta = T(v) q
+
+    (p = Lambda / (1 + Lambda), q = 1 / (1 + Lambda) for a likelihood ratio Lambda of the claim).
+    ``split`` is written with arithmetic only, so it takes a float or a float array alike.
+    """
+
+    @abstractmethod
+    def split(self, c: Any) -> tuple[Any, Any]:
+        """(p, q) of a claim of confidence ``c`` (a float, or an array of them)."""
+
+    def increments(self, c: float, mass: float, belief: tuple[float, float], prior: tuple[float, float]) -> tuple[float, float]:
+        """(d_alpha, d_beta) of one target (the belief and the prior are not used)."""
+        p, q = self.split(c)
+        return mass * p, mass * q
+
+
+class ResetRule(ABC):
+    """A rule that sets the belief to a target chosen by the claim, recorded as the increment
+    target - current so that Eq. 5 holds::
+
+        (alpha*, beta*) = target(c, alpha_0, beta_0),   (d_alpha, d_beta) = (alpha* - alpha, beta* - beta)
+
+    ``target`` is written with arithmetic only, so it takes a float or a float array alike.
+    """
+
+    @abstractmethod
+    def target(self, c: Any, prior_alpha: float, prior_beta: float) -> tuple[Any, Any]:
+        """(alpha*, beta*) after a claim of confidence ``c`` (a float, or an array of them)."""
+
+    def increments(self, c: float, mass: float, belief: tuple[float, float], prior: tuple[float, float]) -> tuple[float, float]:
+        """(d_alpha, d_beta) of one target whose current belief is ``belief``."""
+        ta, tb = self.target(c, *prior)
+        return ta - belief[0], tb - belief[1]
+
+
+#: a pair-local rule: the increments of a claim at (v, phi) depend only on the claim, the target's
+#: mass and that pair's own belief, so claims at different pairs can be applied in any interleaving
+PairRule = LinearRule | ResetRule
+
+
+# ----------------------------------------------------------------------------- the protocol
 @runtime_checkable
 class FusionOperator(Protocol):
     """An update operator U : M x E -> M (Def. 3) with time ticks for its queues.
 
-    - ``update(graph, event, channel)`` applies one evidence event and reports what happened
-      to each targeted element (it first advances time to ``event.t``);
+    Every code path (``sgbelief replay`` / ``bench``, the ConceptGraphs backend, the batched
+    engine) uses an operator through these members only, so an operator written against this
+    protocol behaves as a :class:`~sgbelief.fusion.operators.base.BaseOperator` subclass would;
+    :func:`sgbelief.testing.check_fusion_operator` checks the whole contract.
+
+    - ``name``: the operator's name (reports, the CLI, result tables);
+    - ``config``: its :class:`~sgbelief.fusion.config.OperatorConfig` (tau_T, horizons, ...);
+    - ``stats``: its counters, every key of :data:`STAT_KEYS`; ``stats["events"]`` counts the
+      events applied (a caller locates a rejected event with it);
+    - ``pair_rule``: the operator's :data:`PairRule` when its update of every event is exactly the
+      streaming engine's with that rule (targets with T(v) <= tau_T discarded, the compaction
+      schedule of ``config``, nothing else in its state), else None. A rule lets the batched engine
+      apply a stream in waves (:func:`sgbelief._fast.batched.batched_replay`), with the same result;
+    - ``update(graph, event, channel, *, report=True)`` applies one event (it first advances time
+      to ``event.t``) and reports what happened to each targeted element; ``report=False`` leaves
+      the report's ``targets`` empty, the state is the same;
+    - ``update_many(graph, items)`` applies (event, channel) pairs in order exactly as
+      ``update(..., report=False)`` on each would, and returns their queue resolutions in order;
+      when an event is rejected, the events before it stay applied and the error propagates;
     - ``tick(graph, t)`` advances time without evidence (queue timeouts, compaction);
-    - ``probability(graph, node, predicate)`` is the operator's probability that the predicate holds.
+    - ``probability(graph, node, predicate)`` is the operator's probability that the predicate holds;
+    - ``retract(graph, event_id)`` removes an event's entries exactly and returns the retracted ids.
     """
 
     name: str
+    config: OperatorConfig
+    stats: dict[str, int]
+    pair_rule: PairRule | None
 
     def update(
-        self, graph: SceneGraph, event: EvidenceEvent, channel: GeometricChannel | None = None
+        self, graph: SceneGraph, event: EvidenceEvent, channel: GeometricChannel | None = None, *, report: bool = True
     ) -> UpdateReport: ...
+
+    def update_many(self, graph: SceneGraph, items: Items) -> list[QueueResolution]: ...
 
     def tick(self, graph: SceneGraph, t: int) -> list[QueueResolution]: ...
 
     def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float: ...
+
+    def retract(self, graph: SceneGraph, event_id: str) -> list[str]: ...

@@ -11,7 +11,7 @@ File layout (``format: sgbelief.scene_graph``, ``version: 1``)::
 
 The queues (revision quarantine Q, disagreement queue Q⊥) are the pending entries of the
 provenance log, so they round-trip with it. Loading validates the envelope with pydantic and
-checks Eq. 5 (stored belief = prior + logged increments) for every pair.
+checks Eq. 4 of the paper (stored belief = prior + logged increments) for every pair.
 
 :func:`save_graph` / :func:`load_graph` also dispatch to the columnar binary layout of
 :mod:`sgbelief.graph.binary` (``.npz``, ``format: sgbelief.scene_graph.npz``) by suffix or
@@ -21,19 +21,16 @@ checks Eq. 5 (stored belief = prior + logged increments) for every pair.
 from __future__ import annotations
 
 import json
-import math
-import os
-import stat
-import tempfile
-import time
-from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, BinaryIO, Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from sgbelief.errors import FormatError
-from sgbelief.graph.provenance import ProvenanceStore
+from sgbelief.graph.atomic import atomic_write_binary, atomic_write_text, remove_stale_temp_files
+from sgbelief.graph.binary import load_graph_npz, save_graph_npz
+from sgbelief.graph.json_values import jsonable, restore_node_attr
+from sgbelief.graph.loading import REFERENCE_LOADING, GraphLoading
 from sgbelief.graph.scene_graph import SceneGraph
 
 FORMAT = "sgbelief.scene_graph"
@@ -88,38 +85,21 @@ def _resolve(path: str | Path, format: str | None, *, loading: bool = False) -> 
     return p / GRAPH_FILE, "json"
 
 
-def _jsonable(value: Any, where: str) -> Any:
-    if value is None or isinstance(value, (str, bool, int)):
-        return value
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            raise ValueError(f"{where}: non-finite float {value!r} cannot be saved")
-        return value
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v, where) for v in value]
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v, where) for k, v in value.items()}
-    tolist = getattr(value, "tolist", None)  # numpy arrays and scalars
-    if callable(tolist):
-        return _jsonable(tolist(), where)
-    raise TypeError(f"{where}: value of type {type(value).__name__} is not JSON-serialisable")
-
-
 def graph_to_dict(graph: SceneGraph) -> dict[str, Any]:
     g = graph.nx
     nodes = []
     for n, data in g.nodes(data=True):
         entry = {"id": n}
         for k, v in data.items():
-            entry[k] = _jsonable(v, f"node {n!r} attribute {k!r}")
+            entry[k] = jsonable(v, f"node {n!r} attribute {k!r}")
         nodes.append(entry)
     edges = []
     for u, v, k, data in g.edges(keys=True, data=True):
         entry = {"source": u, "target": v, "key": k}
         for name, val in data.items():
-            entry[name] = _jsonable(val, f"edge {u!r}->{v!r} attribute {name!r}")
+            entry[name] = jsonable(val, f"edge {u!r}->{v!r} attribute {name!r}")
         edges.append(entry)
-    from sgbelief import __version__
+    from sgbelief.version import __version__
 
     return {
         "format": FORMAT,
@@ -127,117 +107,10 @@ def graph_to_dict(graph: SceneGraph) -> dict[str, Any]:
         "created_by": f"sgbelief {__version__}",
         "vocabulary": sorted(graph.vocabulary) if graph.vocabulary is not None else None,
         "clock": graph.clock,
-        "meta": _jsonable(graph.meta, "meta"),
+        "meta": jsonable(graph.meta, "meta"),
         "graph": {"directed": True, "multigraph": True, "graph": dict(g.graph), "nodes": nodes, "edges": edges},
         "provenance": graph.provenance.to_dict(),
     }
-
-
-def atomic_write_text(path: str | Path, text: str | Iterable[str]) -> None:
-    """Write text (a string or an iterable of chunks) atomically: temp file in the same directory,
-    fsync, rename. Readers never see a partial file; on error the old file is left untouched."""
-
-    def write(fh: BinaryIO) -> None:
-        chunks = [text] if isinstance(text, str) else text
-        for chunk in chunks:
-            fh.write(chunk.encode("utf-8"))
-
-    atomic_write_binary(path, write)
-
-
-def _umask() -> int:
-    """The process umask (read by setting and restoring it)."""
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-#: temp files this process is writing right now (never removed as stale)
-_IN_FLIGHT: set[str] = set()
-#: a temp file without a writer's pid in its name (older sgbelief) is stale after this many seconds
-_LEGACY_TMP_AGE = 600.0
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, OSError):
-        return True  # exists (another user's process) or cannot tell: keep its file
-    return True
-
-
-def remove_stale_temp_files(path: str | Path) -> list[Path]:
-    """Remove temp files a killed save of ``path`` left behind (``.<name>.<pid>.XXXX.tmp``).
-
-    A temp file is stale when the process whose pid it names is gone (or is this process, which
-    is not writing it); a temp file without a pid (written by an older sgbelief) when it is older
-    than ten minutes. Temp files of other targets, and of live writers, are left alone.
-    """
-    path = Path(path)
-    prefix, removed = f".{path.name}.", []
-    try:
-        names = os.listdir(path.parent)
-    except OSError:
-        return removed
-    me = os.getpid()
-    now = time.time()
-    for name in names:
-        if not (name.startswith(prefix) and name.endswith(".tmp")):
-            continue
-        cand = path.parent / name
-        if str(cand) in _IN_FLIGHT:
-            continue
-        middle = name[len(prefix):-len(".tmp")].split(".")
-        if len(middle) == 2 and middle[0].isdigit():
-            pid = int(middle[0])
-            stale = pid == me or not _pid_alive(pid)
-        elif len(middle) == 1:
-            try:
-                stale = now - cand.stat().st_mtime > _LEGACY_TMP_AGE
-            except OSError:
-                continue
-        else:
-            continue  # another file name pattern (e.g. a target whose name has more dots)
-        if stale:
-            try:
-                cand.unlink()
-                removed.append(cand)
-            except OSError:
-                pass
-    return removed
-
-
-def atomic_write_binary(path: str | Path, write: Callable[[BinaryIO], None]) -> None:
-    """Call ``write(fh)`` on a temp file in the same directory, fsync, rename over ``path``.
-    Readers never see a partial file; on error the old file is left untouched. Temp files that
-    an earlier, killed save of the same target left behind are removed first."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temp_files(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
-    _IN_FLIGHT.add(tmp)
-    try:
-        # mkstemp creates the file 0600; give it the mode a plain open() would (or the old file's)
-        try:
-            mode = stat.S_IMODE(os.stat(path).st_mode)
-        except FileNotFoundError:
-            mode = 0o666 & ~_umask()
-        os.chmod(fd, mode)
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    finally:
-        _IN_FLIGHT.discard(tmp)
 
 
 def save_graph(graph: SceneGraph, path: str | Path, *, format: str | None = None) -> Path:
@@ -248,26 +121,16 @@ def save_graph(graph: SceneGraph, path: str | Path, *, format: str | None = None
     """
     target, fmt = _resolve(path, format)
     if fmt == "npz":
-        from sgbelief.graph.binary import save_graph_npz
-
         return save_graph_npz(graph, target)
     text = json.dumps(graph_to_dict(graph), separators=(",", ":"), allow_nan=False)
     atomic_write_text(target, text)
     return target
 
 
-def restore_node_attr(key: str, value: Any) -> Any:
-    """Node attributes the API stores as tuples (``centroid``, ``bbox``) come back as tuples of float."""
-    if value is None:
-        return None
-    if key == "centroid":
-        return tuple(float(x) for x in value)
-    if key == "bbox":
-        return tuple(tuple(float(x) for x in corner) for corner in value)
-    return value
-
-
-def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGraph:
+def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>", graph_type: type[SceneGraph] = SceneGraph,
+                    loading: GraphLoading = REFERENCE_LOADING) -> SceneGraph:
+    """The graph of a JSON document (:func:`graph_to_dict`); ``graph_type`` / ``loading`` as in
+    :func:`load_graph`."""
     try:
         env = _Envelope.model_validate(doc)
     except ValidationError as exc:
@@ -277,7 +140,7 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGrap
     if env.version > VERSION or env.version < 1:
         raise FormatError(f"field 'version': file has schema version {env.version}; this sgbelief reads 1..{VERSION}",
                           path=source)
-    graph = SceneGraph(vocabulary=env.vocabulary)
+    graph = graph_type(vocabulary=env.vocabulary)
     graph.clock = env.clock
     graph.meta = dict(env.meta)
     try:
@@ -305,7 +168,7 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGrap
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(f"field 'graph': malformed node-link data ({type(exc).__name__}: {exc})", path=source) from exc
     try:
-        graph.provenance = ProvenanceStore.from_dict(env.provenance)
+        graph.provenance = loading.store_from_dict(env.provenance)
     except FormatError as exc:
         raise FormatError(str(exc), path=source) from exc
     for node, _pred in graph.provenance.pairs():
@@ -314,19 +177,20 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>") -> SceneGrap
     return graph
 
 
-def load_graph(path: str | Path, *, format: str | None = None) -> SceneGraph:
+def load_graph(path: str | Path, *, format: str | None = None, graph_type: type[SceneGraph] = SceneGraph,
+               loading: GraphLoading = REFERENCE_LOADING) -> SceneGraph:
     """Read a saved graph; truncated, edited or hostile files raise FormatError (line / array and field).
 
     A directory holds ``graph.json`` or ``graph.npz``; a file's suffix selects its format unless
-    ``format`` is given.
+    ``format`` is given. ``graph_type``: the class of the graph returned; ``loading``: how its
+    provenance store and node table are built (:mod:`sgbelief.graph.loading`; the reference
+    store by default).
     """
     target, fmt = _resolve(path, format, loading=True)
     if not target.exists():
         raise FileNotFoundError(f"no saved scene graph at {target}")
     if fmt == "npz":
-        from sgbelief.graph.binary import load_graph_npz
-
-        return load_graph_npz(target)
+        return load_graph_npz(target, graph_type=graph_type, loading=loading)
     with open(target, "rb") as fh:
         if fh.read(4) == _ZIP_MAGIC:
             raise FormatError("this is a binary (npz) scene graph, not JSON; name it .npz or pass format='npz'",
@@ -340,7 +204,7 @@ def load_graph(path: str | Path, *, format: str | None = None) -> SceneGraph:
         raise FormatError(f"not UTF-8 text: {exc}", path=target) from exc
     if not isinstance(doc, dict):
         raise FormatError("top level must be a JSON object", path=target)
-    return graph_from_dict(doc, source=str(target))
+    return graph_from_dict(doc, source=str(target), graph_type=graph_type, loading=loading)
 
 
 __all__ = [

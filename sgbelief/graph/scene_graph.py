@@ -1,9 +1,14 @@
-"""The belief scene graph M = (G, Phi, B) of Def. 1: a typed wrapper over a networkx graph."""
+"""The belief scene graph M = (G, Phi, B) of Def. 1: a typed wrapper over a networkx graph.
+
+This is the model: it imports neither the file formats nor the query layer. Saving, loading and
+querying are free functions over a graph (:func:`sgbelief.graph.persistence.save_graph` /
+:func:`~sgbelief.graph.persistence.load_graph`, :func:`sgbelief.query.run_query`); the public
+:class:`sgbelief.SceneGraph` (:mod:`sgbelief.api.scene_graph`) adds them as methods.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
-from pathlib import Path
 from typing import Any
 
 import networkx as nx
@@ -44,9 +49,12 @@ class SceneGraph:
         *,
         prior: tuple[float, float] = (PRIOR_ALPHA, PRIOR_BETA),
         name: str | None = None,
+        provenance: ProvenanceStore | None = None,
     ) -> None:
         self.nx: nx.MultiDiGraph = nx.MultiDiGraph(name=name or "sgbelief")
-        self.provenance = ProvenanceStore(prior)
+        #: the beliefs and their logs; ``provenance``: an empty store to use instead of a
+        #: new reference store with ``prior`` (then ``prior`` is ignored)
+        self.provenance = ProvenanceStore(prior) if provenance is None else provenance
         self.vocabulary: frozenset[str] | None = None
         if vocabulary is not None:
             preds = getattr(vocabulary, "predicates", vocabulary)
@@ -114,8 +122,16 @@ class SceneGraph:
 
     def node_attrs(self, node: NodeId) -> dict[str, Any]:
         """The node's attribute dict (live); raises UnknownNodeError."""
-        self._require(node)
-        return self.nx.nodes[node]
+        try:
+            return self.nx.nodes[node]
+        except (KeyError, TypeError, nx.NetworkXError):  # absent, unhashable, or a slice
+            raise UnknownNodeError(node) from None
+
+    def node_attr_table(self) -> dict[NodeId, dict[str, Any]]:
+        """Every node's attribute dict (live), by node in the order of :meth:`nodes`: the bulk form
+        of :meth:`node_attrs` that reads over the whole map make (a subclass that changes what
+        one returns changes the other with it)."""
+        return dict(self.nx.nodes(data=True))
 
     def find_node(self, node: object) -> dict[str, Any] | None:
         """The node's attribute dict, or None when absent."""
@@ -168,23 +184,26 @@ class SceneGraph:
         self.check_predicate(predicate)
         return self.provenance.mean(node, predicate)
 
-    def probabilities(self, nodes: Iterable[NodeId], predicate: str) -> list[float]:
+    def probabilities(self, nodes: Iterable[NodeId] | None, predicate: str) -> list[float]:
         """:meth:`probability` of each node, in order, with the same checks and errors (the
-        predicate checked once): the bulk read a query over many nodes makes."""
+        predicate checked once): the bulk read a query over many nodes makes. ``nodes=None``:
+        every node of the graph, in the order of :meth:`nodes`.
+
+        Both read the posterior means of the provenance store; a subclass that changes what
+        :meth:`probability` returns changes this bulk form with it."""
+        if nodes is None:
+            every = self.nodes()
+            if every:
+                self.check_predicate(predicate)
+            return self.provenance.means(every, predicate)
         nodes = list(nodes)
-        if type(self).probability is not SceneGraph.probability:
-            return [self.probability(n, predicate) for n in nodes]
         if not nodes:
             return []
         self._require(nodes[0])
         self.check_predicate(predicate)
-        contains = self.nx._node.__contains__
+        graph = self.nx
         for n in nodes:
-            try:
-                known = contains(n)
-            except TypeError:  # unhashable: not a node (as ``node in graph`` says)
-                known = False
-            if not known:
+            if n not in graph:  # (networkx answers False for an unhashable id)
                 raise UnknownNodeError(n)
         return self.provenance.means(nodes, predicate)
 
@@ -239,32 +258,6 @@ class SceneGraph:
         merged.extend(g.nodes[absorb].get("merged_from", ()))
         g.nodes[keep]["merged_from"] = merged
         g.remove_node(absorb)
-
-    # ----------------------------------------------------------- persistence
-    def save(self, path: str | Path, *, format: str | None = None) -> Path:
-        """Save losslessly and atomically; returns the file written.
-
-        ``format="json"`` (the default; a directory path gets ``graph.json``) or ``"npz"``, the
-        columnar binary layout for large maps (a directory path gets ``graph.npz``). A ``.json`` /
-        ``.npz`` suffix selects the format when ``format`` is not given.
-        """
-        from sgbelief.graph.persistence import save_graph
-
-        return save_graph(self, path, format=format)
-
-    @classmethod
-    def load(cls, path: str | Path, *, format: str | None = None) -> SceneGraph:
-        """Load a graph written by :meth:`save` (format from the suffix, or the file found in a
-        directory); malformed, truncated or edited files raise FormatError."""
-        from sgbelief.graph.persistence import load_graph
-
-        return load_graph(path, format=format)
-
-    def query(self, expr: Any, **kwargs: Any) -> Any:
-        """Answer a compound query (see :mod:`sgbelief.query`)."""
-        from sgbelief.query import run_query
-
-        return run_query(self, expr, **kwargs)
 
     def __repr__(self) -> str:
         return (

@@ -27,7 +27,9 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from sgbelief.query.language import Compound, Literal, QueryPredicateError, parse
+from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.query.language import Compound, Literal, QueryPredicateError, QuerySyntaxError, parse
+from sgbelief.query.named import UnknownNamedQueryError, find_named_query, suggest_named_queries
 from sgbelief.query.relations import DEFAULT_REGISTRY, GeometryContext, RelationConfig, RelationRegistry
 
 __all__ = ["Component", "Match", "QueryResult", "QueryEngine", "run_query"]
@@ -158,14 +160,15 @@ class QueryEngine:
 
     ``registry``: geometric predicates (default :data:`DEFAULT_REGISTRY`); ``config``: their
     thresholds; ``tau``: retrieval threshold; ``require_evidence``: see the module docstring;
-    ``probability``: ``f(node, predicate) -> p`` used for belief literals (default
-    ``graph.probability``; pass ``operator.probability`` bound to the graph for an operator's
-    recalibrated probability); ``use_precomputed``: a node attribute
+    ``probability``: ``f(node, predicate) -> p`` used for belief literals, node by node (default:
+    the graph's own beliefs, read in bulk through ``graph.probabilities``; pass
+    ``operator.probability`` bound to the graph for an operator's recalibrated probability);
+    ``use_precomputed``: a node attribute
     ``geometric_predicates = {name: bool}`` (simulated ``nodes.json``) overrides the registry.
     The caches assume the graph does not change while the engine is in use (call :meth:`clear`
     after updates)."""
 
-    def __init__(self, graph: Any, *, registry: RelationRegistry | None = None,
+    def __init__(self, graph: SceneGraph, *, registry: RelationRegistry | None = None,
                  config: RelationConfig | None = None, tau: float = 0.5,
                  require_evidence: bool = True, probability: Callable[[Any, str], float] | None = None,
                  use_precomputed: bool = True) -> None:
@@ -173,6 +176,9 @@ class QueryEngine:
             raise ValueError(f"tau must be in [0, 1], got {tau!r}")
         self.graph = graph
         self.probability_fn = probability if probability is not None else graph.probability
+        #: the bulk read of belief literals: the graph's own when no ``probability`` is given
+        self._read_probabilities: Callable[[list[Any], str], list[float]] = (
+            graph.probabilities if probability is None else _per_node(probability))
         self.use_precomputed = use_precomputed
         self.registry = registry if registry is not None else DEFAULT_REGISTRY
         self.config = config or RelationConfig()
@@ -194,9 +200,8 @@ class QueryEngine:
     def known_belief_predicates(self) -> set[str]:
         if self._known_beliefs is None:
             known = set(self.graph.predicates())
-            vocab = getattr(self.graph, "vocabulary", None)
-            if vocab:
-                known |= set(vocab)
+            if self.graph.vocabulary:
+                known |= set(self.graph.vocabulary)
             self._known_beliefs = known
         return self._known_beliefs
 
@@ -219,12 +224,7 @@ class QueryEngine:
         """Nodes with at least one evidence entry on ``predicate``."""
         s = self._evidence.get(predicate)
         if s is None:
-            prov = getattr(self.graph, "provenance", None)
-            if prov is not None and hasattr(prov, "nodes_with"):
-                s = set(prov.nodes_with(predicate))
-            else:
-                s = {n for n in self.graph.nodes() if predicate in self.graph.beliefs(n)}
-            self._evidence[predicate] = s
+            s = self._evidence[predicate] = set(self.graph.provenance.nodes_with(predicate))
         return s
 
     def belief(self, node: Any, predicate: str) -> float:
@@ -237,18 +237,13 @@ class QueryEngine:
 
     def belief_many(self, predicate: str, nodes: Iterable[Any]) -> list[float]:
         """:meth:`belief` of each node, in order (each node read once, then cached). When the
-        engine reads the graph's own ``probability``, the uncached nodes go through the graph's
-        bulk ``probabilities`` (same values and errors, the predicate checked once)."""
+        engine reads the graph's own beliefs, the uncached nodes go through the graph's bulk
+        ``probabilities`` (same values and errors as ``probability``, the predicate checked once)."""
         cache = self._prob.setdefault(predicate, {})
         nodes = nodes if isinstance(nodes, (list, tuple)) else list(nodes)
         todo = [n for n in dict.fromkeys(nodes) if n not in cache]
         if todo:
-            fn = self.probability_fn
-            bulk = getattr(self.graph, "probabilities", None)
-            if bulk is not None and getattr(fn, "__self__", None) is self.graph and getattr(fn, "__name__", "") == "probability":
-                values = bulk(todo, predicate)
-            else:
-                values = [fn(n, predicate) for n in todo]
+            values = self._read_probabilities(todo, predicate)
             for n, p in zip(todo, values):
                 cache[n] = float(p)
             self.belief_reads += len(todo)
@@ -385,7 +380,7 @@ class QueryEngine:
         return m
 
 
-def run_query(graph: Any, expr: str | Compound, tau: float = 0.5, registry: RelationRegistry | None = None, *,
+def run_query(graph: SceneGraph, expr: str | Compound, tau: float = 0.5, registry: RelationRegistry | None = None, *,
               config: RelationConfig | None = None, require_evidence: bool = True,
               include_all: bool = False, limit: int | None = None) -> QueryResult:
     """Answer one compound query: ``expr`` is an expression, a :class:`Compound`, or the name /
@@ -393,8 +388,6 @@ def run_query(graph: Any, expr: str | Compound, tau: float = 0.5, registry: Rela
     ``config`` is given). Returns a ranked, self-explaining :class:`QueryResult`."""
     name = None
     if isinstance(expr, str):
-        from sgbelief.query.named import find_named_query
-
         nq = find_named_query(expr)
         if nq is not None:
             name, expr = nq.name, nq.compound
@@ -409,12 +402,18 @@ def run_query(graph: Any, expr: str | Compound, tau: float = 0.5, registry: Rela
 def _check_not_a_mistyped_name(expr: str) -> None:
     """Words with no operator that do not parse ("car near unicorn") were meant as a named query:
     say there is no such query and suggest the closest ones, instead of a syntax error."""
-    from sgbelief.query.language import QuerySyntaxError
-    from sgbelief.query.named import UnknownNamedQueryError, suggest_named_queries
-
     if any(ch in expr for ch in "&|!()~") or len(expr.split()) < 2:
         return
     try:
         parse(expr)
     except QuerySyntaxError:
         raise UnknownNamedQueryError(expr.strip(), suggest_named_queries(expr)) from None
+
+
+def _per_node(probability: Callable[[Any, str], float]) -> Callable[[list[Any], str], list[float]]:
+    """The bulk read made of a per-node ``probability(node, predicate)``."""
+
+    def read(nodes: list[Any], predicate: str) -> list[float]:
+        return [probability(n, predicate) for n in nodes]
+
+    return read

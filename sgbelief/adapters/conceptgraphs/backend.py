@@ -8,11 +8,11 @@ of the detected ConceptGraphs generation through :class:`~.patching.Patcher`.
 from __future__ import annotations
 
 import contextlib
-import gc
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from sgbelief._fast import gc as gc_tuning
 from sgbelief.adapters.conceptgraphs.functions import GenerationFunctions, make_functions
 from sgbelief.adapters.conceptgraphs.map_beliefs import (
     DEFAULT_LABEL_KEY,
@@ -74,7 +74,7 @@ class ConceptGraphsBackend(MapBeliefs):
         gc_checkpoints: bool = False,
         label_rule: str | Mapping[str, str] = "most_frequent",
     ) -> None:
-        from sgbelief.graph.scene_graph import SceneGraph
+        from sgbelief.api.scene_graph import SceneGraph
 
         if isinstance(vocabulary, ClassVocabulary):
             vocab = vocabulary
@@ -83,7 +83,7 @@ class ConceptGraphsBackend(MapBeliefs):
         else:
             vocab = ClassVocabulary.from_yaml(vocabulary)
         if isinstance(operator, str):
-            from sgbelief.fusion.registry import make_operator
+            from sgbelief.api.operators import make_operator
 
             op = make_operator(operator, config=operator_config, vocabulary=vocab.table())
             self.operator_name = operator
@@ -110,8 +110,7 @@ class ConceptGraphsBackend(MapBeliefs):
         previous one. Cycles that become garbage after being frozen wait for ``gc.unfreeze()``
         (done by :meth:`uninstall`). See docs/performance.md, "ConceptGraphs per-frame cost".
         """
-        gc.collect()
-        gc.freeze()
+        gc_tuning.checkpoint()
         self._froze = True
 
     def end_frame(self) -> None:
@@ -144,7 +143,7 @@ class ConceptGraphsBackend(MapBeliefs):
             self._patcher.uninstall()
             self._patcher = None
         if self._froze:
-            gc.unfreeze()
+            gc_tuning.release_checkpoints()
             self._froze = False
 
     @contextlib.contextmanager
@@ -160,6 +159,16 @@ class ConceptGraphsBackend(MapBeliefs):
     def generation(self) -> str | None:
         return None if self._patcher is None else self._patcher.generation
 
+    def log_to_rerun(self, frame: int, *, recording: Any = None, prefix: str = "sgbelief", timeline: str = "t") -> int:
+        """Log the map as it stands after ``frame`` into the current rerun recording (or ``recording``):
+        boxes with committed label and P, every belief's mean, the claims refused in this frame.
+        Needs ``sgbelief[rerun]``; see docs/visualisation.md. Returns the number of entities logged."""
+        from sgbelief.viz.rerun_log import log_frame
+
+        return log_frame(self.graph, frame, recording=recording, prefix=prefix, tau=self.tau, timeline=timeline)
+
     def save(self, path: str | Path) -> Path:
         """Save the belief graph (SceneGraph JSON)."""
-        return self.graph.save(path)
+        from sgbelief.graph.persistence import save_graph
+
+        return save_graph(self.graph, path)

@@ -48,8 +48,10 @@ def _objects_of(results: Any, path: Any) -> tuple[list[tuple[str, dict]], list[s
     return out, class_names
 
 
-def import_result(results: Any, backend: Any, *, path: Any = None) -> ImportSummary:
-    """Replay every object's (class, confidence, frame) history, in frame order, into ``backend``."""
+def import_result(results: Any, backend: Any, *, path: Any = None, progress: Any = None) -> ImportSummary:
+    """Replay every object's (class, confidence, frame) history, in frame order, into ``backend``.
+
+    ``progress``, if given, is called as ``progress(done, total)`` every 256 detections and at the end."""
     objects, class_names = _objects_of(results, path)
     if class_names:
         backend.class_names.update(dict(enumerate(class_names)))
@@ -68,8 +70,12 @@ def import_result(results: Any, backend: Any, *, path: Any = None) -> ImportSumm
             claims.append((claim.t, order, k, node, single))
     claims.sort(key=lambda c: (c[0], c[1], c[2]))
     n_events = 0
-    for _t, _o, _k, node, single in claims:
+    for i, (_t, _o, _k, node, single) in enumerate(claims):
         n_events += backend.route_detection(single, {node: 1.0})
+        if progress is not None and (i + 1) % 256 == 0:
+            progress(i + 1, len(claims))
+    if progress is not None:
+        progress(len(claims), len(claims))
     summary = ImportSummary(n_objects=len(objects), n_detections=len(claims), n_events=n_events)
     for node, obj in objects:
         ids = [c.class_id for c in backend.claims_of(obj)]
@@ -87,8 +93,8 @@ def import_result(results: Any, backend: Any, *, path: Any = None) -> ImportSumm
     return summary
 
 
-def import_file(path: str | Path, backend: Any) -> ImportSummary:
-    """Load ``path`` with the restricted unpickler and import it."""
+def import_file(path: str | Path, backend: Any, *, progress: Any = None) -> ImportSummary:
+    """Load ``path`` with the restricted unpickler and import it (``progress``: see import_result)."""
     from sgbelief.adapters.conceptgraphs.unpickler import load_cg_result
 
-    return import_result(load_cg_result(path), backend, path=path)
+    return import_result(load_cg_result(path), backend, path=path, progress=progress)

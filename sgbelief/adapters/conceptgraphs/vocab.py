@@ -116,10 +116,10 @@ class ClassVocabulary:
         """A vocabulary derived from a detector class list (a path, a shipped name such as
         ``scannet200`` / ``coco80``, or a list of names), a taxonomy and an optional mapping into the
         geometric channel's labels (e.g. ``scannet200_nyu40``). See :mod:`sgbelief.fusion.open_vocab`."""
-        from sgbelief.fusion.compatibility import SubsumptionTable
+        from sgbelief.fusion.open_vocab import derive_table
 
         ignore = list(ignore)
-        table = SubsumptionTable.from_class_list(class_list, taxonomy, mapping, ignore=ignore)
+        table = derive_table(class_list, taxonomy, mapping, ignore=ignore)
         aliases = {alias: pred for pred, spec in table.specs.items() for alias in spec.aliases}
         return cls(classes, aliases=aliases, ignore=ignore, table=table)
 

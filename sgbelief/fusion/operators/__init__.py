@@ -1,12 +1,15 @@
-"""The six fusion operators."""
+"""The six fusion operators, and the rules of the pair-local baselines."""
 
 from __future__ import annotations
 
-from sgbelief.fusion.operators.base import BaseOperator
+from sgbelief.fusion.operators.base import REFERENCE, BaseOperator, OperatorEngine
 from sgbelief.fusion.operators.baselines import (
     MajorityVoteOperator,
+    MajorityVoteRule,
     NaiveBayesOperator,
+    NaiveBayesRule,
     OverwriteOperator,
+    OverwriteRule,
     RefinedOperator,
 )
 from sgbelief.fusion.operators.calibrated import (
@@ -15,9 +18,13 @@ from sgbelief.fusion.operators.calibrated import (
     PaperCalibratedOperator,
     PaperCoModulatedOperator,
 )
+from sgbelief.fusion.operators.compaction import CompactionSchedule
 
 __all__ = [
     "BaseOperator",
+    "OperatorEngine",
+    "REFERENCE",
+    "CompactionSchedule",
     "OverwriteOperator",
     "MajorityVoteOperator",
     "NaiveBayesOperator",
@@ -26,4 +33,7 @@ __all__ = [
     "CoModulatedOperator",
     "PaperCalibratedOperator",
     "PaperCoModulatedOperator",
+    "MajorityVoteRule",
+    "NaiveBayesRule",
+    "OverwriteRule",
 ]

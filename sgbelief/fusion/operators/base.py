@@ -1,16 +1,33 @@
-"""Shared machinery of the operators: time ticks, compaction schedule, targeting filter, stats."""
+"""Shared machinery of the operators: engines, time ticks, the targeting filter, stats.
+
+An operator applies events through an *engine*: an object with ``apply(op, graph, items, reports)``
+(:class:`OperatorEngine`). The reference engine (the default here) runs each family's readable
+steps, :meth:`BaseOperator._apply_reference`; the fused loops of :mod:`sgbelief._fast` are injected
+by the public wiring, ``sgbelief.make_operator(name, ..., engine="fast")``, and are proven
+identical to the reference (``tests/test_engines.py``).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from sgbelief.errors import UnknownPredicateError
+from sgbelief.fusion import queues
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, resolve_config
-from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
-from sgbelief.fusion import queues
-from sgbelief.fusion.rules import verdict
+from sgbelief.fusion.operators.compaction import CompactionSchedule
+from sgbelief.fusion.protocol import (
+    Action,
+    Items,
+    PairRule,
+    QueueResolution,
+    TargetOutcome,
+    UpdateReport,
+    increment_stance,
+    make_report,
+    new_stats,
+)
+from sgbelief.fusion.rules import claim_asserts, verdict
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
@@ -20,76 +37,110 @@ if TYPE_CHECKING:  # pragma: no cover
 _NO_CLAIM = Verdict.NO_CLAIM
 
 
+class OperatorEngine(Protocol):
+    """How an operator applies (event, channel) pairs: the reference steps or a fused loop.
+
+    ``apply(op, graph, items, reports)`` applies ``items`` in order to ``graph`` with ``op``'s
+    rule and state, appends one report per event to ``reports`` (per-target outcomes included)
+    unless it is None, and returns every event's queue resolutions in order. When an event is
+    rejected, the events before it stay applied (``op.stats["events"]`` counts them).
+    """
+
+    name: str
+
+    def apply(self, op: Any, graph: SceneGraph, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]: ...
+
+
+class ReferenceEngine:
+    """The named steps of each operator family (:meth:`BaseOperator._apply_reference`)."""
+
+    name = "reference"
+
+    def apply(self, op: Any, graph: SceneGraph, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
+        return op._apply_reference(graph, items, reports)
+
+    def __repr__(self) -> str:
+        return "ReferenceEngine()"
+
+    def __reduce__(self) -> str:
+        return "REFERENCE"  # copies and pickles are the module's one engine object
+
+
+REFERENCE = ReferenceEngine()
+
+
+def resolve_engine(engine: OperatorEngine | str | None) -> OperatorEngine:
+    """The engine an operator runs with: None or ``"reference"`` give :data:`REFERENCE`; an engine
+    object is taken as given. The fused engines live above this layer, so ``"fast"`` is chosen by
+    :func:`sgbelief.make_operator` (which passes the engine object), not here."""
+    if engine is None or engine == "reference":
+        return REFERENCE
+    if isinstance(engine, str):
+        raise ValueError(
+            f"engine={engine!r}: an operator class takes an engine object or 'reference'; for the fused "
+            f"engine use sgbelief.make_operator(name, config, vocabulary, engine='fast')"
+        )
+    if not callable(getattr(engine, "apply", None)):
+        raise TypeError(f"engine must have an apply(op, graph, items, reports) method, got {type(engine).__name__}")
+    return engine
+
+
 class BaseOperator:
     """Common base of the six operators (all implement :class:`~sgbelief.fusion.protocol.FusionOperator`).
 
-    Subclasses implement :meth:`_increment` (baselines) or override :meth:`update`.
+    A subclass states its update rule in one of two ways: ``pair_rule``, a
+    :data:`~sgbelief.fusion.protocol.PairRule` (the baselines whose increments depend only on the
+    claim and the pair's own belief; the batched engine applies the same rule), or, with
+    ``pair_rule = None``, :meth:`_increment`, called per target (a rule with its own state, such as
+    ``refined``). The calibrated family replaces the whole step (:meth:`_apply_reference`).
     ``vocabulary`` (a SubsumptionTable) is needed for verdicts and calibration outcomes;
     baselines only use it to report the verdict they ignore.
     """
 
     name = "base"
+    #: the operator's pair-local rule, or None (then :meth:`_increment` gives each target's increments)
+    pair_rule: PairRule | None = None
 
     def __init__(
         self,
         config: OperatorConfig | dict[str, Any] | str | None = None,
         vocabulary: SubsumptionTable | None = None,
+        *,
+        engine: OperatorEngine | str | None = None,
     ) -> None:
         self.config = resolve_config(config)
         self.vocabulary = vocabulary
-        self.stats: dict[str, int] = {
-            "events": 0,
-            "targets": 0,
-            "committed": 0,
-            "refused": 0,
-            "quarantined": 0,
-            "released": 0,
-            "corroborated": 0,
-            "discarded": 0,
-            "resolved": 0,
-            "expired": 0,
-            "below_tau_t": 0,
-            "compacted": 0,
-        }
-        cls = type(self)
-        #: the lean path may apply _split directly (the subclass did not override _increment)
-        self._linear = cls._increment is BaseOperator._increment and cls._split is not BaseOperator._split
-        self._has_timeouts = cls._timeouts is not BaseOperator._timeouts
-        self._tick_config: OperatorConfig | None = None
-        self._interval = 0
+        self.engine = resolve_engine(engine)
+        self.stats: dict[str, int] = new_stats()
+        self._schedule_of: tuple[OperatorConfig, CompactionSchedule] | None = None
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"
 
     # ---------------------------------------------------------------- time
+    @property
+    def schedule(self) -> CompactionSchedule:
+        """The compaction schedule of the current config (derived once per config: configs are immutable)."""
+        held = self._schedule_of
+        cfg = self.config
+        if held is None or held[0] is not cfg:
+            held = self._schedule_of = (cfg, CompactionSchedule.of(cfg))
+        return held[1]
+
     def tick(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
         """Advance to time t: queue timeouts, then a compaction pass (entries older than T_prov are
-        folded) every ``compaction_interval`` steps (T_prov by default; Alg. 1, last lines)."""
+        folded) on the first tick of each compaction epoch (:class:`CompactionSchedule`)."""
         if t <= graph.clock:
             return []
         graph.clock = t
-        cfg = self.config
-        out = self._timeouts(graph, t) if self._has_timeouts else []
-        if cfg is not self._tick_config:  # derived once per config (configs are immutable)
-            self._tick_config = cfg
-            self._interval = cfg.compaction_interval
-        interval = self._interval
-        epoch = t // interval
-        meta = graph.meta
-        last = meta.get("compaction_epoch", 0)
-        saved_interval = meta.get("compaction_interval", cfg.t_prov)
-        if saved_interval != interval:  # the graph was compacted under another interval
-            last = last * saved_interval // interval
-        if epoch > last:
-            meta["compaction_epoch"] = epoch
-            if interval != cfg.t_prov:
-                meta["compaction_interval"] = interval
-            elif "compaction_interval" in meta:
-                del meta["compaction_interval"]
-            self.stats["compacted"] += graph.provenance.compact(t - cfg.t_prov)
+        out = self._timeouts(graph, t)
+        schedule = self.schedule
+        if schedule.advance(graph.meta, t):
+            self.stats["compacted"] += graph.provenance.compact(schedule.horizon(t))
         return out
 
     def _timeouts(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
+        """Queue entries that time out at t (the baselines hold no queue)."""
         return []
 
     def _add_totals(
@@ -114,6 +165,34 @@ class BaseOperator:
             stats[r.kind] = stats.get(r.kind, 0) + 1
 
     # -------------------------------------------------------------- update
+    def update(
+        self,
+        graph: SceneGraph,
+        event: EvidenceEvent,
+        channel: GeometricChannel | None = None,
+        *,
+        report: bool = True,
+    ) -> UpdateReport:
+        """Apply one event. ``report=False`` skips building the per-target outcomes (the returned
+        report then has ``targets == ()``); the map, queues, provenance, stats and any calibration
+        state are the same either way."""
+        if not report:
+            res = self.engine.apply(self, graph, ((event, channel),), None)
+            return make_report((event.id, event.t, event.predicate, (), tuple(res) if res else ()))
+        reports: list[UpdateReport] = []
+        self.engine.apply(self, graph, ((event, channel),), reports)
+        return reports[0]
+
+    def update_many(self, graph: SceneGraph, items: Items) -> list[QueueResolution]:
+        """Apply (event, channel) pairs in order, exactly as ``update(graph, event, channel,
+        report=False)`` on each would (same map, provenance, queues and stats after every event),
+        with the per-call set-up done once. Returns the queue resolutions of all the events, in
+        order (what their reports' ``resolutions`` would hold). When an event is rejected, the
+        events before it stay applied (``stats["events"]`` counts them) and the error propagates.
+        ``update`` and ``update_many`` are one engine call: a subclass changes the rule
+        (``pair_rule`` / :meth:`_increment`), not one of the two."""
+        return self.engine.apply(self, graph, items, None)
+
     def _check(self, graph: SceneGraph, event: EvidenceEvent) -> None:
         vocab = graph.vocabulary
         if vocab is not None and event.predicate not in vocab:
@@ -123,150 +202,58 @@ class BaseOperator:
         """compat(phi, label) with the sign rule (:func:`sgbelief.fusion.rules.verdict`)."""
         if label is None or self.vocabulary is None:
             return _NO_CLAIM
-        return verdict(self.vocabulary.outcome(predicate, label), c >= 0.5)
+        return verdict(self.vocabulary.outcome(predicate, label), claim_asserts(c))
 
-    def update(
-        self,
-        graph: SceneGraph,
-        event: EvidenceEvent,
-        channel: GeometricChannel | None = None,
-        *,
-        report: bool = True,
-    ) -> UpdateReport:
-        """Apply one event with the subclass's increment rule (baselines ignore the verdict).
-
-        ``report=False`` skips building the per-target outcomes (the returned report has
-        ``targets == ()``); the map, provenance and stats are the same either way.
-        """
-        if not report:
-            res = self._update_lean(graph, ((event, channel),))
-            return make_report((event.id, event.t, event.predicate, (), tuple(res) if res else ()))
-        pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
-        vocab = graph.vocabulary
-        if vocab is not None and pred not in vocab:
-            raise UnknownPredicateError(pred, vocab)
-        resolutions = self.tick(graph, t) if t > graph.clock else []
+    def _apply_reference(self, graph: SceneGraph, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
+        """The baselines' step for each (event, channel) in order: every target with T(v) > tau_T
+        gets the rule's increments (:meth:`_target_increments`), committed; the verdict is only
+        reported (baselines ignore it)."""
         tau_t = self.config.tau_t
-        commit = graph.provenance.commit
-        gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
-        increment = self._increment
-        label_of = channel.label if channel is not None else None
-        verdict_of = self._verdict
-        outcomes = []
-        n_targets = n_below = n_committed = 0
-        for node, mass in event.targets.items():
-            n_targets += 1
-            label = label_of(node, t) if label_of is not None else None
-            v = verdict_of(label, pred, c)
-            if mass <= tau_t:
-                n_below += 1
-                outcomes.append(TargetOutcome(node, mass, v, Action.BELOW_THRESHOLD))
-                continue
-            if node not in gnx:
-                graph.ensure_node(node)
-            inc = increment(graph, node, pred, c, mass)
-            if inc is None:
-                outcomes.append(TargetOutcome(node, mass, v, Action.IGNORED))
-                continue
-            da, db = inc
-            commit(node, pred, eid, t, da, db, 1 if da > db else -1 if da < db else 0)
-            n_committed += 1
-            outcomes.append(TargetOutcome(node, mass, v, Action.COMMITTED, da, db))
-        self._add_totals(1, n_targets, n_below, n_committed)
-        return make_report((eid, t, pred, tuple(outcomes), tuple(resolutions)))
-
-    def update_many(
-        self, graph: SceneGraph, items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]]
-    ) -> list[QueueResolution]:
-        """Apply (event, channel) pairs in order, exactly as ``update(graph, event, channel,
-        report=False)`` on each would (same map, provenance, queues and stats after every event),
-        with the per-call set-up done once. Returns the queue resolutions of all the events, in
-        order (what their reports' ``resolutions`` would hold). When an event is rejected, the
-        events before it stay applied (``stats["events"]`` counts them) and the error propagates.
-
-        Baselines ignore the channel: the verdict only feeds per-target reports. A subclass that
-        overrides ``update`` (and not ``update_many``) gets its own ``update`` on each event.
-        """
-        if type(self).update is not BaseOperator.update:
-            return self._update_each(graph, items)
-        return self._update_lean(graph, items)
-
-    def _update_each(
-        self, graph: SceneGraph, items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]]
-    ) -> list[QueueResolution]:
-        """``update_many`` through ``self.update`` (protocol signature) on each event."""
+        prov = graph.provenance
         out: list[QueueResolution] = []
         for event, channel in items:
-            res = self.update(graph, event, channel).resolutions
-            if res:
-                out += res
+            self._check(graph, event)
+            pred, c, t = event.predicate, event.confidence, event.t
+            resolutions = self.tick(graph, t) if t > graph.clock else []
+            outcomes: list[TargetOutcome] = []
+            n_targets = n_below = n_committed = 0
+            for node, mass in event.targets.items():
+                n_targets += 1
+                label = channel.label(node, t) if channel is not None and reports is not None else None
+                v = self._verdict(label, pred, c)
+                if mass <= tau_t:
+                    n_below += 1
+                    outcomes.append(TargetOutcome(node, mass, v, Action.BELOW_THRESHOLD))
+                    continue
+                graph.ensure_node(node)
+                inc = self._target_increments(graph, node, pred, c, mass)
+                if inc is None:
+                    outcomes.append(TargetOutcome(node, mass, v, Action.IGNORED))
+                    continue
+                da, db = inc
+                prov.commit(node, pred, event.id, t, da, db, increment_stance(da, db))
+                n_committed += 1
+                outcomes.append(TargetOutcome(node, mass, v, Action.COMMITTED, da, db))
+            self._add_totals(1, n_targets, n_below, n_committed)
+            out += resolutions
+            if reports is not None:
+                reports.append(make_report((event.id, t, pred, tuple(outcomes), tuple(resolutions))))
         return out
 
-    def _update_lean(
-        self, graph: SceneGraph, items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]]
-    ) -> list[QueueResolution]:
-        """The report-free update of each event, with the subclass's increment rule."""
-        vocab = graph.vocabulary
-        tau_t = self.config.tau_t
-        commit = graph.provenance.commit
-        gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
-        linear = self._linear  # a linear rule: d_alpha = T p, d_beta = T q for every target
-        split_of = self._split
-        increment = self._increment
-        tick = self.tick
-        out: list[QueueResolution] = []
-        n_events = n_targets = n_below = n_committed = 0
-        try:
-            for event, _channel in items:
-                pred, c, t, eid = event.predicate, event.confidence, event.t, event.id
-                if vocab is not None and pred not in vocab:
-                    raise UnknownPredicateError(pred, vocab)
-                if t > graph.clock:
-                    res = tick(graph, t)
-                    if res:
-                        out += res
-                split = split_of(c) if linear else None  # None: this claim takes the general rule
-                lin = split is not None
-                if lin:
-                    p, q = split  # type: ignore[misc]
-                e_targets = e_below = e_committed = 0
-                for node, mass in event.targets.items():
-                    e_targets += 1
-                    if mass <= tau_t:
-                        e_below += 1
-                        continue
-                    if node not in gnx:
-                        graph.ensure_node(node)
-                    if lin:
-                        da = mass * p
-                        db = mass * q
-                    else:
-                        inc = increment(graph, node, pred, c, mass)
-                        if inc is None:
-                            continue
-                        da, db = inc
-                    commit(node, pred, eid, t, da, db, 1 if da > db else -1 if da < db else 0)
-                    e_committed += 1
-                n_events += 1
-                n_targets += e_targets
-                n_below += e_below
-                n_committed += e_committed
-        finally:
-            if n_events:
-                self._add_totals(n_events, n_targets, n_below, n_committed)
-        return out
+    def _target_increments(
+        self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float
+    ) -> tuple[float, float] | None:
+        """The increments of one target with T(v) > tau_T: the pair rule's, else :meth:`_increment`'s."""
+        rule = self.pair_rule
+        if rule is None:
+            return self._increment(graph, node, predicate, c, mass)
+        prov = graph.provenance
+        return rule.increments(c, mass, prov.alpha_beta(node, predicate), (prov.prior_alpha, prov.prior_beta))
 
     def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float] | None:
-        """The increments (d_alpha, d_beta) of one target, or None when the rule ignores the claim."""
-        split = self._split(c)
-        if split is None:
-            raise NotImplementedError(f"{type(self).__name__} defines neither _increment nor _split")
-        return mass * split[0], mass * split[1]
-
-    def _split(self, c: float) -> tuple[float, float] | None:
-        """(p, q) when the rule is linear in the targeting mass (d_alpha = T p, d_beta = T q for
-        every target, whatever the belief), else None. Computed once per event on the lean path."""
-        return None
+        """The increments (d_alpha, d_beta) of one target, or None when the rule ignores the claim
+        (the rule of an operator without ``pair_rule``)."""
+        raise NotImplementedError(f"{type(self).__name__} defines neither a pair_rule nor _increment")
 
     # ------------------------------------------------------------ reading
     def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float:

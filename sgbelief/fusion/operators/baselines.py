@@ -1,19 +1,72 @@
-"""The four baselines of Table 1: the fusion practice deployed mapping systems use today."""
+"""The four baselines of Table 1: the fusion practice deployed mapping systems use today.
+
+Three of them are pair-local (:data:`~sgbelief.fusion.protocol.PairRule`): each states its rule
+once, as a small frozen rule object, and every engine (the reference steps, the fused streaming
+loop, the batched waves) applies that object. ``refined`` keeps a window per pair (operator state)
+and gives its increments per target (:meth:`RefinedOperator._increment`).
+"""
 
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 from typing import Any
 
 from sgbelief.fusion.operators.base import BaseOperator
+from sgbelief.fusion.protocol import LinearRule, ResetRule
+from sgbelief.fusion.rules import claim_asserts
 from sgbelief.graph.scene_graph import SceneGraph
 
 
-class OverwriteOperator(BaseOperator):
-    """Overwrite: the latest decisive claim wins.
+@dataclass(frozen=True)
+class MajorityVoteRule(LinearRule):
+    """Majority vote weighted by raw confidence: T(v) c votes for phi, T(v) (1 - c) against::
 
-    Each event sets B(v, phi) to a high-confidence belief in the claim's direction:
-    Beta(alpha_0 + s, beta_0) when c >= 0.5, Beta(alpha_0, beta_0 + s) otherwise
+        d_alpha = T(v) c,   d_beta = T(v) (1 - c)
+    """
+
+    def split(self, c: Any) -> tuple[Any, Any]:
+        return c, 1.0 - c
+
+
+@dataclass(frozen=True)
+class NaiveBayesRule(LinearRule):
+    """Naive Bayes with a fixed reliability r: the raw confidence seen through a symmetric channel,
+    p = r c + (1 - r)(1 - c), Lambda = p / (1 - p), then Eq. 4 with w = T(v)::
+
+        d_alpha = T(v) p,   d_beta = T(v) (1 - p)
+    """
+
+    reliability: float
+
+    def split(self, c: Any) -> tuple[Any, Any]:
+        r = self.reliability
+        p = r * c + (1.0 - r) * (1.0 - c)
+        return p, 1.0 - p
+
+
+@dataclass(frozen=True)
+class OverwriteRule(ResetRule):
+    """The latest decisive claim wins: Beta(alpha_0 + s, beta_0) when the claim asserts phi
+    (c >= 0.5), Beta(alpha_0, beta_0 + s) otherwise (s = ``strength``)::
+
+        a = [c >= 0.5],   (alpha*, beta*) = (alpha_0 + s a, beta_0 + s (1 - a))
+
+    (s a is s or 0.0 exactly, so this is the two cases bit for bit.)
+    """
+
+    strength: float
+
+    def target(self, c: Any, prior_alpha: float, prior_beta: float) -> tuple[Any, Any]:
+        asserts = claim_asserts(c) * 1.0  # 1.0 or 0.0 (a float array for an array of claims)
+        s = self.strength
+        return prior_alpha + s * asserts, prior_beta + s * (1.0 - asserts)
+
+
+class OverwriteOperator(BaseOperator):
+    """Overwrite: the latest decisive claim wins (:class:`OverwriteRule`).
+
+    Each event sets B(v, phi) to a high-confidence belief in the claim's direction
     (s = ``baselines.overwrite.strength``, default 9 -> mean 0.91). Represents label
     assignment by the most recent detection. Recorded as the increment new - old, so Eq. 5 holds.
     """
@@ -22,50 +75,27 @@ class OverwriteOperator(BaseOperator):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self._strength = self.config.baselines.overwrite.strength
-
-    def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
-        prov = graph.provenance
-        pa, pb = prov.prior_alpha, prov.prior_beta
-        log = prov._pairs.get((node, predicate))  # = prov.alpha_beta, without the method call
-        a, b = (pa, pb) if log is None else (log.alpha, log.beta)
-        if c >= 0.5:
-            return pa + self._strength - a, pb - b
-        return pa - a, pb + self._strength - b
+        self.pair_rule = OverwriteRule(self.config.baselines.overwrite.strength)
 
 
 class MajorityVoteOperator(BaseOperator):
-    """Majority vote weighted by raw confidence (ConceptGraphs' practice, no calibration).
-
-    Each claim adds T(v) c votes for phi and T(v) (1 - c) against: alpha += T c, beta += T (1 - c).
-    The belief mean is the confidence-weighted vote share; phi commits when it exceeds tau.
-    """
+    """Majority vote weighted by raw confidence (ConceptGraphs' practice, no calibration;
+    :class:`MajorityVoteRule`). The belief mean is the confidence-weighted vote share; phi commits
+    when it exceeds tau."""
 
     name = "majority"
-
-    def _split(self, c: float) -> tuple[float, float]:
-        return c, 1.0 - c
+    pair_rule = MajorityVoteRule()
 
 
 class NaiveBayesOperator(BaseOperator):
-    """Naive Bayes with a fixed assumed reliability r (Kimera-Semantics style).
-
-    The raw confidence is taken as a calibrated probability seen through a symmetric channel
-    of reliability r: p = r c + (1 - r)(1 - c), likelihood ratio Lambda = p / (1 - p), and the
-    fractional pseudo-count update of Eq. 4 with w = 1: alpha += T p, beta += T (1 - p).
-    Parameter: ``baselines.naive_bayes.reliability`` (default 0.8).
-    """
+    """Naive Bayes with a fixed assumed reliability r (Kimera-Semantics style; :class:`NaiveBayesRule`).
+    Parameter: ``baselines.naive_bayes.reliability`` (default 0.8)."""
 
     name = "naive_bayes"
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self._reliability = self.config.baselines.naive_bayes.reliability
-
-    def _split(self, c: float) -> tuple[float, float]:
-        r = self._reliability
-        p = r * c + (1.0 - r) * (1.0 - c)
-        return p, 1.0 - p
+        self.pair_rule = NaiveBayesRule(self.config.baselines.naive_bayes.reliability)
 
 
 class RefinedOperator(BaseOperator):
@@ -92,15 +122,14 @@ class RefinedOperator(BaseOperator):
         if state is None:
             state = self._windows[key] = [deque(maxlen=self._window), 0]
         win, pos = state
-        vote = 1 if c >= 0.5 else 0
+        vote = 1 if claim_asserts(c) else 0
         if len(win) == self._window:
             pos -= win[0]  # the vote the append below pushes out
         win.append(vote)
         pos += vote
         state[1] = pos
         prov = graph.provenance
-        log = prov._pairs.get(key)
-        a, b = (prov.prior_alpha, prov.prior_beta) if log is None else (log.alpha, log.beta)
+        a, b = prov.alpha_beta(node, predicate)
         n = len(win)
         if n < self._min_support:
             ta, tb = prov.prior_alpha, prov.prior_beta

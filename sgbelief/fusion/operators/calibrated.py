@@ -1,25 +1,24 @@
 """U_cal and U_comod: the calibrated commit gate and the co-modulated operator (Alg. 1, Eq. 2-5).
 
 :meth:`CalibratedOperator._apply_reference` is Algorithm 1 written as its named steps over the
-pure functions of :mod:`sgbelief.fusion.rules`; it is the reference. ``engine="fast"`` (the
-default) runs the same algorithm fused into one loop (private: ``_calibrated_fast``), proven
+pure functions of :mod:`sgbelief.fusion.rules`; it is the reference, and the engine an operator
+built here runs by default. ``sgbelief.make_operator(name, ..., engine="fast")`` (the public
+default) injects the same algorithm fused into one loop (:mod:`sgbelief._fast.calibrated`), proven
 identical by ``tests/test_engines.py``. The method options and their derivations are in
 ``docs/method.md``; ``cal_paper`` / ``comod_paper`` are the paper's own settings.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 from sgbelief.fusion import queues
 from sgbelief.fusion.calibration import MondrianCalibrator
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, paper_variant, resolve_config
 from sgbelief.fusion.conformal import ConformalSlice, PredictionSet, no_coverage, prediction_set
-from sgbelief.fusion.operators import _calibrated_fast
-from sgbelief.fusion.operators.base import BaseOperator
-from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
+from sgbelief.fusion.operators.base import BaseOperator, OperatorEngine
+from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_exceeds: re-exported)
     claim_asserts,
     claim_increments,
@@ -40,7 +39,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.graph.provenance import ProvenanceStore
     from sgbelief.graph.scene_graph import SceneGraph
 
-ENGINES = ("fast", "reference")
 _CONTRA = Verdict.CONTRADICTS
 _CORR = Verdict.CORROBORATES
 
@@ -62,7 +60,9 @@ class CalibratedOperator(BaseOperator):
        set) is appended to the calibration buffer (so an event never calibrates itself).
 
     U_cal consults the geometric channel only for calibration, never to refuse a claim.
-    ``engine``: ``"fast"`` (fused loop, default) or ``"reference"`` (the named steps); same results.
+    ``engine``: an :class:`~sgbelief.fusion.operators.base.OperatorEngine`; None or ``"reference"``
+    run the named steps; ``sgbelief.make_operator(..., engine="fast")`` passes the fused loop
+    (same results).
     """
 
     name = "cal"
@@ -74,12 +74,9 @@ class CalibratedOperator(BaseOperator):
         config: OperatorConfig | dict[str, Any] | str | None = None,
         vocabulary: SubsumptionTable | None = None,
         *,
-        engine: Literal["fast", "reference"] = "fast",
+        engine: OperatorEngine | str | None = None,
     ) -> None:
-        super().__init__(self._settings(resolve_config(config)), vocabulary)
-        if engine not in ENGINES:
-            raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
-        self.engine = engine
+        super().__init__(self._settings(resolve_config(config)), vocabulary, engine=engine)
         cfg = self.config
         import sklearn.isotonic  # noqa: F401  (pay the import here, not inside the first timed update)
 
@@ -119,53 +116,7 @@ class CalibratedOperator(BaseOperator):
         return out
 
     # ----------------------------------------------------------- update
-    def update(
-        self,
-        graph: SceneGraph,
-        event: EvidenceEvent,
-        channel: GeometricChannel | None = None,
-        *,
-        report: bool = True,
-    ) -> UpdateReport:
-        """Apply one event (Alg. 1). ``report=False`` skips building the per-target outcomes
-        (the returned report then has ``targets == ()``); the map, queues, provenance, stats and
-        calibration state are the same either way."""
-        if not report:
-            res = self._apply(graph, ((event, channel),), None)
-            return make_report((event.id, event.t, event.predicate, (), tuple(res) if res else ()))
-        reports: list[UpdateReport] = []
-        self._apply(graph, ((event, channel),), reports)
-        return reports[0]
-
-    def update_many(
-        self, graph: SceneGraph, items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]]
-    ) -> list[QueueResolution]:
-        """Apply (event, channel) pairs in order, exactly as ``update(graph, event, channel,
-        report=False)`` on each would (map, queues, provenance, stats and calibration state after
-        every event), with the per-call set-up done once; returns the queue resolutions in order.
-        When an event is rejected, the events before it stay applied (``stats["events"]`` counts
-        them) and the error propagates. A subclass that overrides ``update`` (and not this method)
-        gets its own ``update`` on each event."""
-        if type(self).update is not CalibratedOperator.update:
-            return self._update_each(graph, items)
-        return self._apply(graph, items, None)
-
-    def _apply(
-        self,
-        graph: SceneGraph,
-        items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]],
-        reports: list[UpdateReport] | None,
-    ) -> list[QueueResolution]:
-        if self.engine == "fast":
-            return _calibrated_fast.apply_fused(self, graph, items, reports)
-        return self._apply_reference(graph, items, reports)
-
-    def _apply_reference(
-        self,
-        graph: SceneGraph,
-        items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]],
-        reports: list[UpdateReport] | None,
-    ) -> list[QueueResolution]:
+    def _apply_reference(self, graph: SceneGraph, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
         """Algorithm 1, step by step, for each (event, channel) in order (the reference path)."""
         out: list[QueueResolution] = []
         for event, channel in items:

@@ -1,16 +1,18 @@
 """Private: Algorithm 1 for ``cal`` / ``comod`` fused into one loop (the ``engine="fast"`` path).
 
-This is :meth:`CalibratedOperator._apply_reference` with the step functions of
-:mod:`sgbelief.fusion.rules` inlined and the per-event set-up hoisted, and with committed entries
-sent to the provenance store's journal. It may read private state of the store and the graph.
-Its results (map, provenance, queues, stats, calibration state) equal the reference path's:
-``tests/test_engines.py`` checks that by hypothesis (``sgbelief.testing.check_fast_matches_reference``).
-Measurements behind its shape are in docs/performance.md.
+This is :meth:`CalibratedOperator._apply_reference
+<sgbelief.fusion.operators.calibrated.CalibratedOperator._apply_reference>` with the step
+functions of :mod:`sgbelief.fusion.rules` inlined and the per-event set-up hoisted, and with
+committed entries sent to the provenance store's journal. It reads private state of the operator,
+the store and the graph. Its results (map, provenance, queues, stats, calibration state) equal the
+reference path's: ``tests/test_engines.py`` checks that by hypothesis
+(``sgbelief.testing.check_fast_matches_reference``). :data:`FUSED_CALIBRATED` is the engine object
+``sgbelief.make_operator(..., engine="fast")`` passes to the calibrated operators. Measurements
+behind its shape are in docs/performance.md.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 from sgbelief.errors import UnknownPredicateError
@@ -18,13 +20,11 @@ from sgbelief.fusion import queues
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import Verdict
 from sgbelief.fusion.conformal import ConformalSlice
-from sgbelief.fusion.protocol import Action, QueueResolution, TargetOutcome, UpdateReport, make_report
+from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.rules import kl_upper_bound, revision_kl_exceeds
 from sgbelief.graph.provenance import EntryStatus
 
 if TYPE_CHECKING:  # pragma: no cover
-    from sgbelief.fusion.channel import GeometricChannel
-    from sgbelief.fusion.events import EvidenceEvent
     from sgbelief.fusion.operators.calibrated import CalibratedOperator
     from sgbelief.graph.scene_graph import SceneGraph
 
@@ -40,10 +40,30 @@ _A_QUARANTINED = Action.QUARANTINED
 _A_REFUSED = Action.REFUSED
 
 
+class FusedCalibratedEngine:
+    """The fused loop as an :class:`~sgbelief.fusion.operators.base.OperatorEngine` of the calibrated family."""
+
+    name = "fast"
+
+    def apply(self, op: CalibratedOperator, graph: SceneGraph, items: Items,
+              reports: list[UpdateReport] | None) -> list[QueueResolution]:
+        return apply_fused(op, graph, items, reports)
+
+    def __repr__(self) -> str:
+        return "FusedCalibratedEngine()"
+
+    def __reduce__(self) -> str:
+        return "FUSED_CALIBRATED"  # copies and pickles are the module's one engine object
+
+
+#: the engine object of ``engine="fast"`` for cal / comod (and their paper variants)
+FUSED_CALIBRATED = FusedCalibratedEngine()
+
+
 def apply_fused(
     op: CalibratedOperator,
     graph: SceneGraph,
-    items: Iterable[tuple[EvidenceEvent, GeometricChannel | None]],
+    items: Items,
     reports: list[UpdateReport] | None,
 ) -> list[QueueResolution]:
     """Alg. 1 for each (event, channel) in order; appends one report per event to ``reports``
