@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from sgbelief.adapters.conceptgraphs import ConceptGraphsBackend
 from sgbelief.adapters.conceptgraphs.functions import make_functions
@@ -269,3 +271,47 @@ def test_ali_dev_relabel_loop_reads_no_beliefs_whatever_the_map_size() -> None:
     assert ops[0] / writes[0] == ops[1] / writes[1] <= 40  # a constant per write: no loop, no call
     assert small == large
     assert small == _frame_opcodes_through_the_merge("ali-dev", 12) - Counter({setitem: 12})
+
+
+# a frame: per detection (class id, confidence, matched object index or None for a new object)
+_frames = st.lists(st.lists(st.tuples(st.integers(0, 3), st.floats(0.05, 0.99), st.one_of(st.none(), st.integers(0, 30))),
+                            min_size=1, max_size=4), min_size=1, max_size=12)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(frames=_frames, op=st.sampled_from(["majority", "comod"]), wrong=st.integers(0, 3))
+def test_ali_dev_labels_after_each_frame_equal_the_labels_read_from_the_beliefs(frames: list, op: str,
+                                                                                   wrong: int) -> None:
+    # relabelling only what changed must leave every object's class_name equal to a fresh read of its
+    # beliefs, after the patched merge and after the script's relabel loop, whatever the frames
+    import torch
+
+    channel = (lambda det, node, t: CLASSES[(det["class_id"][0] + wrong) % 4]) if op == "comod" else None
+    backend = ConceptGraphsBackend(op, class_names=CLASSES, channel=channel)
+    def merge(obj1: dict, obj2: dict, **_geometry: Any) -> dict:
+        # ConceptGraphs' merge with the geometry left out: the per-detection lists are concatenated
+        for key in ("class_id", "conf", "image_idx", "mask_idx"):
+            obj1[key] = obj1[key] + obj2[key]
+        return obj1
+
+    fns = make_functions(backend, "ali-dev", originals={"merge_obj2_into_obj1": merge})
+    objects: list[dict] = []
+    for t, frame in enumerate(frames):
+        dets = [{"class_id": [c], "conf": [conf], "image_idx": [t], "mask_idx": [k], "class_name": CLASSES[c],
+                 "id": f"d{t}-{k}"} for k, (c, conf, _j) in enumerate(frame)]
+        if not objects:
+            objects.extend(dets)  # the script's first frame
+            continue
+        match = [None if j is None else j % len(objects) for _c, _conf, j in frame]
+        sims = torch.full((len(dets), len(objects)), float("-inf"))
+        for i, j in enumerate(match):
+            if j is not None:
+                sims[i, j] = 1.5
+        idx = fns.match_detections_to_objects(sims, 1.1)
+        objects = fns.merge_obj_matches(dets, objects, idx, 0.05, False, 0.1, 10, "iou", "cpu")
+        assert all(o["class_name"] == backend.label_of(o) for o in objects)
+        for obj in objects:  # the script's relabel loop
+            name = CLASSES[Counter(obj["class_id"]).most_common(1)[0][0]]
+            if obj["class_name"] != name:
+                obj["class_name"] = name
+        assert all(o["class_name"] == backend.label_of(o) for o in objects)

@@ -78,7 +78,8 @@ def test_real_package_patch_contract_labels_and_restore():
         assert list(ours[0]["class_id"]) == list(ref[0]["class_id"])
         assert ours[0]["num_detections"] == ref[0]["num_detections"]
         assert len(ours[0]["pcd"].points) == len(ref[0]["pcd"].points)
-        assert backend.graph.evidence_count() == 40
+        assert backend.routed_detections == 40  # each detection routed once (comod may log a geometric
+        # observation next to a claim, so the graph's evidence count can be larger)
         assert Counter(ours[0]["class_id"]).most_common(1)[0][0] == 1  # the vote says table
         if GENERATION == "main":
             assert list(ours.get_most_common_class()) == [0]
