@@ -312,3 +312,38 @@ def test_ali_dev_relabels_an_untouched_object_whose_beliefs_a_queue_release_chan
     assert objects[1]["class_name"] == "sofa"  # relabelled though no detection touched it
     objects[1]["class_name"] = "table"  # the script's vote write keeps the belief label
     assert objects[1]["class_name"] == "sofa"
+
+
+def test_a_class_no_detection_named_is_labelled_from_the_geometric_labels():
+    """A sofa the detector always calls 'table': comod observes 'sofa' from the channel (geometric
+    evidence ``label``), the backend considers is_sofa at that object and names it 'sofa' (its
+    class id from the class list), though no detection said so."""
+    feat = np.random.default_rng(7).normal(size=16)
+    stream = [make_detection(blob((0, 0, 0), seed=k), 1, "table", 0.9, k, feature=feat, seed=k) for k in range(8)]
+    backend = ConceptGraphsBackend("comod", channel=lambda det, node, t: "sofa", class_names=CLASSES)
+    f = backend.functions("main")
+    objects = run_main(f, copy.deepcopy(stream), cfg())
+    assert majority_class(objects[0]["class_id"]) == 1  # ConceptGraphs' vote: table
+    assert backend.label_of(objects[0]) == "sofa"
+    assert f.get_most_common_class(objects) == [2]
+    assert backend.summary(objects).unknown == 0
+    # with the claimed pair's verdict alone the object commits to nothing
+    verdict_only = ConceptGraphsBackend("comod", channel=lambda det, node, t: "sofa", class_names=CLASSES,
+                                        operator_config={"geometric_evidence": "verdict"})
+    g = verdict_only.functions("main")
+    objects = run_main(g, copy.deepcopy(stream), cfg())
+    assert verdict_only.label_of(objects[0]) == "unknown"
+    assert verdict_only.summary(objects).unknown == 1
+
+
+def test_the_backend_observes_labels_unless_its_config_says_otherwise():
+    assert ConceptGraphsBackend("comod").operator.config.geometric_evidence == "label"
+    assert ConceptGraphsBackend("comod", operator_config={"tau": 0.6}).operator.config.geometric_evidence == "label"
+    kept = ConceptGraphsBackend("comod", operator_config={"geometric_evidence": "verdict"})
+    assert kept.operator.config.geometric_evidence == "verdict"
+    forced = ConceptGraphsBackend("comod", operator_config={"geometric_evidence": "verdict"}, geometric_evidence="none")
+    assert forced.operator.config.geometric_evidence == "none"
+    from sgbelief.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="geometric_evidence"):
+        ConceptGraphsBackend("comod", geometric_evidence="sometimes")

@@ -35,7 +35,7 @@ def _streams():
 
 @settings(max_examples=120, deadline=None)
 @given(raw=_streams(), name=st.sampled_from(NAMES), tau_rev=st.sampled_from([0.05, 0.5]),
-       strata=st.integers(1, 4), geo=st.sampled_from(["none", "verdict"]))
+       strata=st.integers(1, 4), geo=st.sampled_from(["none", "verdict", "label"]))
 def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo) -> None:
     """Maps, provenance (every entry, in order), queues, stats and calibration buffers are equal."""
     stream, t = [], 0

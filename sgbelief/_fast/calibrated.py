@@ -90,6 +90,8 @@ def apply_fused(
     tables = op.vocabulary.outcome_tables() if op.vocabulary is not None else None
     comod = op.check_compatibility
     geo = op.observes_geometry
+    asserted = op.vocabulary.asserted_tables() if op.observes_label else None  # type: ignore[union-attr]
+    label_seen = op._label_seen_of(prov) if asserted is not None else None
     n_strata = cfg.calibration.support_strata
     cal_sign = cfg.verdict_sign == "calibrated"
     top = n_strata - 1
@@ -130,6 +132,7 @@ def apply_fused(
                 if mass <= tau_t and not report:
                     e_below += 1
                     continue
+                label = None
                 if label_of is None:
                     y = None
                 else:
@@ -172,6 +175,15 @@ def apply_fused(
                     verdict, code = _CONTRA, _E_CONTRA
                 if node not in gnx:
                     graph.ensure_node(node)
+                if asserted is not None and label is not None:
+                    # rules.label_observations, inlined: the label observes what it asserts (not pred)
+                    for psi in asserted.get(label, ()):
+                        if psi != pred and label_seen.get((node, psi)) != t:  # type: ignore[union-attr]
+                            label_seen[(node, psi)] = t  # type: ignore[index]
+                            if prov._timeline:
+                                record(node, psi, eid, t, w0 * mass, 0.0, _COMMITTED, 1, _E_GEO, c)
+                            else:
+                                commit(node, psi, eid, t, w0 * mass, 0.0, 1, _E_GEO, c)
                 if log is None:
                     a, b = prior_a, prior_b
                 else:

@@ -136,6 +136,12 @@ class SubsumptionTable:
             for alias in [*spec.aliases, *spec.positive]:
                 self._alias.setdefault(normalise_class_name(alias), pred)
             self._alias.setdefault(normalise_class_name(pred.removeprefix("is_")), pred)
+        #: label -> the predicates whose positive set holds it (what the label itself asserts)
+        self._asserted: dict[str, tuple[str, ...]] = {}
+        for pred, table in self._outcomes.items():
+            for lab, y in table.items():
+                if y == 1:
+                    self._asserted[lab] = (*self._asserted.get(lab, ()), pred)
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> SubsumptionTable:
@@ -229,6 +235,15 @@ class SubsumptionTable:
             return Verdict.NO_CLAIM
         agrees = (y == 1) == (confidence >= 0.5)
         return Verdict.CORROBORATES if agrees else Verdict.CONTRADICTS
+
+    def asserted_by(self, label: str) -> tuple[str, ...]:
+        """The predicates a geometric label asserts: those whose positive set holds it, in table
+        order (``chair`` -> ``("is_chair",)``; an ambiguous or unknown label -> ``()``)."""
+        return self._asserted.get(label, ())
+
+    def asserted_tables(self) -> dict[str, tuple[str, ...]]:
+        """label -> :meth:`asserted_by` (read-only use in hot loops)."""
+        return self._asserted
 
     def predicate_for_class(self, class_name: str) -> str | None:
         """The predicate a detector class name asserts (via aliases / positive labels), or None."""

@@ -65,10 +65,12 @@ class OperatorConfig(_Frozen):
     t_disagree: int = Field(10, ge=0, description="conflict-drop window of Q_bot")
     tau: float = Field(0.5, ge=0.0, lt=1.0, description="commit threshold")
     tau_t: float = Field(0.1, ge=0.0, lt=1.0, description="targeting-mass threshold")
-    geometric_evidence: Literal["none", "verdict"] = Field(
+    geometric_evidence: Literal["none", "verdict", "label"] = Field(
         "verdict",
-        description="comod: a decisive geometric label also enters the belief as one observation of y "
-        "(verdict, default) or is used only to refuse and calibrate (none, the paper)",
+        description="comod: a decisive geometric label also enters the belief as one observation of y at "
+        "the claimed pair (verdict, default), also of the predicates the label itself asserts (label: the "
+        "ConceptGraphs backend's default, docs/method.md §3), or is used only to refuse and calibrate "
+        "(none, the paper)",
     )
     verdict_sign: Literal["calibrated", "raw"] = Field(
         "calibrated",

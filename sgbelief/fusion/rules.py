@@ -14,6 +14,7 @@ weight w = w0 kappa T(v)    :func:`evidence_weight`
 increments (Eq. 3)          :func:`claim_increments`
 Eq. 3 inverted (Λ̂, w)      :func:`claim_lambda_hat`, :func:`claim_weight`
 geometric observation       :func:`verification_increments`
+label's own predicates      :func:`label_observations`
 revision test (KL > tau)    :func:`revision_kl_exceeds` (bound: :func:`kl_upper_bound`)
 ==========================  ==========================================================
 """
@@ -41,6 +42,7 @@ __all__ = [
     "claim_lambda_hat",
     "claim_weight",
     "verification_increments",
+    "label_observations",
     "kl_upper_bound",
     "revision_kl_exceeds",
     "stance_of",
@@ -135,6 +137,25 @@ def verification_increments(outcome: int, weight: float) -> tuple[float, float]:
         (d_alpha, d_beta) = (w T(v), 0) if outcome == 1 else (0, w T(v))
     """
     return (weight, 0.0) if outcome == 1 else (0.0, weight)
+
+
+def label_observations(asserted: tuple[str, ...], claimed: str, node: object, t: int,
+                       seen: dict[tuple[object, str], int]) -> list[str]:
+    """The predicates a geometric label observes at v besides the claimed one (``geometric_evidence: label``).
+
+    The label at (v, t) is evidence about what v is, whatever the claim named: a sofa the detector
+    keeps calling ``tv`` is observed as a sofa. Each predicate psi the label asserts (its positive
+    set holds the label), other than the claimed phi (observed already by
+    :func:`verification_increments`), gets one observation y = 1, (d_alpha, d_beta) = (w0 T(v), 0),
+    at most once per (v, psi, t): several claims about v in one frame see one label, not several.
+    ``seen`` maps (v, psi) to the time of its last label observation and is updated in place.
+    """
+    out = []
+    for psi in asserted:
+        if psi != claimed and seen.get((node, psi)) != t:
+            seen[(node, psi)] = t
+            out.append(psi)
+    return out
 
 
 def stance_of(lam: float) -> int:

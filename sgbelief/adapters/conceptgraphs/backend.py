@@ -39,6 +39,12 @@ class ConceptGraphsBackend(MapBeliefs):
             ``fn(detection, node, t) -> str | None``.  A detection's own ``label_key`` entry wins.
         graph: the scene graph to fill (default: a new one); one handed in may already hold evidence.
         operator_config: the operator's config (a name, a YAML path, a dict) when ``operator`` is a name.
+        geometric_evidence: how ``comod`` reads the geometric label when ``operator`` is a name:
+            ``"label"`` also observes the predicates the label itself asserts, so an object whose
+            class no detection named can still be labelled (docs/method.md §3; the label rule keeps
+            such predicates as a fallback), ``"verdict"`` or ``"none"``. None (default): the
+            ``operator_config``'s own ``geometric_evidence`` when it sets one, else ``"label"``
+            (the operator default elsewhere is ``"verdict"``).
         label_key: detection-dict key holding a per-detection geometric label (popped from the dict
             before ConceptGraphs' merge sees it, since the original merges reject unknown keys).
         unknown_label / unknown_class_id: label written when no predicate commits.
@@ -73,6 +79,7 @@ class ConceptGraphsBackend(MapBeliefs):
         class_names: Sequence[str] | None = None,
         gc_checkpoints: bool = False,
         label_rule: str | Mapping[str, str] = "most_frequent",
+        geometric_evidence: str | None = None,
     ) -> None:
         from sgbelief.api.scene_graph import SceneGraph
 
@@ -85,7 +92,8 @@ class ConceptGraphsBackend(MapBeliefs):
         if isinstance(operator, str):
             from sgbelief.api.operators import make_operator
 
-            op = make_operator(operator, config=operator_config, vocabulary=vocab.table())
+            op = make_operator(operator, config=_with_geometric_evidence(operator_config, geometric_evidence),
+                               vocabulary=vocab.table())
             self.operator_name = operator
         else:
             op = operator
@@ -172,3 +180,18 @@ class ConceptGraphsBackend(MapBeliefs):
         from sgbelief.graph.persistence import save_graph
 
         return save_graph(self.graph, path)
+
+
+def _with_geometric_evidence(config: Any, geometric_evidence: str | None) -> Any:
+    """The backend's operator config: ``config`` (anything
+    :func:`~sgbelief.fusion.config.resolve_config` reads; None: the shipped default) with
+    ``geometric_evidence`` set, validated. None sets ``"label"`` unless ``config`` sets the key itself."""
+    from sgbelief.fusion.config import OperatorConfig, resolve_config
+
+    base = OperatorConfig.default() if config is None else resolve_config(config)
+    if geometric_evidence is None:
+        if config is not None and "geometric_evidence" in base.model_fields_set:
+            return base
+        geometric_evidence = "label"
+    return OperatorConfig.from_mapping({**base.model_dump(), "geometric_evidence": geometric_evidence},
+                                       source="ConceptGraphsBackend(geometric_evidence=...)")

@@ -38,6 +38,12 @@ def geometry_summary(obj: Any) -> tuple[Any, Any]:
     as tuples of floats, or (None, None) when it has none."""
     pts = None
     pcd = obj.get("pcd")
+    if pcd is not None and hasattr(pcd, "get_min_bound") and hasattr(pcd, "has_points"):
+        # an open3d cloud answers from its own buffers, without a copy into numpy (docs/performance.md)
+        if not pcd.has_points():
+            return None, None
+        lo, hi, centre = pcd.get_min_bound(), pcd.get_max_bound(), pcd.get_center()
+        return tuple(float(x) for x in centre), (tuple(float(x) for x in lo), tuple(float(x) for x in hi))
     if pcd is not None and hasattr(pcd, "points"):
         pts = np.asarray(pcd.points)
     elif obj.get("pcd_np") is not None:

@@ -37,7 +37,7 @@ class _EventChannel:
     the detection dict; any other channel through ``label(node, t)``.
     """
 
-    __slots__ = ("_label", "_detection", "_fallback", "_fn", "_index")
+    __slots__ = ("_label", "_detection", "_fallback", "_fn", "_index", "answers")
 
     def __init__(self, label: str | None, detection: dict | None, fallback: Any, fn: DetectionLabelFn | None,
                  index: int = 0) -> None:
@@ -46,8 +46,16 @@ class _EventChannel:
         self._fallback = fallback
         self._fn = fn
         self._index = index
+        #: the labels this channel gave, per node asked (the operator asks once per target)
+        self.answers: dict[Any, str] = {}
 
     def label(self, node: Any, t: int) -> str | None:
+        value = self._ask(node, t)
+        if value is not None:
+            self.answers[node] = value
+        return value
+
+    def _ask(self, node: Any, t: int) -> str | None:
         if self._label is not None:
             return self._label
         if self._fn is not None and self._detection is not None:
@@ -162,6 +170,8 @@ class MapBeliefs:
         self._names_per_node: dict[Any, Counter[tuple[int | None, str]]] = {}
         #: predicates the backend routed to each node (O(1) label reads; the graph has no per-node index)
         self._preds_per_node: dict[Any, set[str]] = {}
+        #: predicates only the geometric labels asserted at each node (candidates when no claimed one commits)
+        self._label_preds_per_node: dict[Any, set[str]] = {}
         self._predicate_cache: dict[str, str | None] = {}
         self._seeded: set[Any] = set()
         self._detections_per_node: Counter[Any] = Counter()
@@ -231,9 +241,9 @@ class MapBeliefs:
         return node
 
     def _add_graph_node(self, node: Any, obj: Mapping[str, Any]) -> None:
-        centroid, bbox = geometry_summary(obj)
         if node in self.graph:
             return
+        centroid, bbox = geometry_summary(obj)
         self.graph.add_node(node, centroid=centroid, bbox=bbox, source="conceptgraphs")
 
     # ------------------------------------------------------------------ evidence
@@ -284,6 +294,10 @@ class MapBeliefs:
                 report = self.operator.update(self.graph, event, channel)
             if report.resolutions:
                 self._note_resolutions(report.resolutions)
+            if channel is not self._null and channel.answers:
+                # comod observes what the geometric label asserts (geometric_evidence: label): a
+                # label is a candidate class of its node even when no detection named it
+                self._note_label_predicates(channel.answers)
             if self.keep_reports:
                 self.reports.append(report)
             n_events += 1
@@ -293,6 +307,20 @@ class MapBeliefs:
             changed.add(node)
         self._routed_detections += len(claims)
         return n_events
+
+    def _note_label_predicates(self, answers: Mapping[Any, str]) -> None:
+        """Note the predicates each answered label asserts as its node's geometric candidates."""
+        table = self.table
+        if table is None:
+            return
+        for node, label in answers.items():
+            asserted = table.asserted_by(label)
+            if asserted:
+                preds = self._label_preds_per_node.get(node)
+                if preds is None:
+                    self._label_preds_per_node[node] = set(asserted)
+                else:
+                    preds.update(asserted)
 
     def _note_resolutions(self, resolutions: Iterable[Any]) -> None:
         """A queued event left its queue (released, corroborated, ...): its node's beliefs may move."""
@@ -358,6 +386,7 @@ class MapBeliefs:
         names = self._names_per_node.setdefault(keep, Counter())
         names.update(self._names_per_node.pop(raw, Counter()))
         self._preds_per_node.setdefault(keep, set()).update(self._preds_per_node.pop(raw, ()))
+        self._label_preds_per_node.setdefault(keep, set()).update(self._label_preds_per_node.pop(raw, ()))
         self.identity.absorb(raw, keep)
         self._changed.add(keep)
 
@@ -380,6 +409,7 @@ class MapBeliefs:
         if self.on_filter == "remove":
             self.graph.remove_node(node)
             self._preds_per_node.pop(node, None)
+            self._label_preds_per_node.pop(node, None)
         else:
             self.graph.nx.nodes[node]["cg_filtered"] = True
         self.identity.retire(node)
@@ -422,11 +452,26 @@ class MapBeliefs:
     def committed_predicate(self, node: Any) -> str | None:
         """The predicate with the highest committed probability (> tau), or None.
 
-        The probability is the operator's (``FusionOperator.probability``), for every operator."""
+        The candidates are the predicates the node's detections claimed. Only when none of them
+        commits are the predicates that the geometric labels alone asserted considered (comod,
+        ``geometric_evidence: label``): a sofa the detector always calls ``tv`` is labelled
+        ``sofa``, while one stray label of a segmenter does not outrank a class the detector
+        keeps naming and the geometry keeps confirming. Under independent Beta(1, 1) beliefs, a
+        single observation (mean 2/3) would otherwise outrank a well-supported class with a few
+        contradictions. The probability is the operator's (``FusionOperator.probability``), for
+        every operator."""
+        best = self._best_committed(sorted(self._predicates_of(node)), node)
+        if best is None:
+            extra = self._label_preds_per_node.get(node)
+            if extra:
+                best = self._best_committed(sorted(extra), node)
+        return best
+
+    def _best_committed(self, preds: Iterable[str], node: Any) -> str | None:
         best, best_p = None, self.tau
         probability = self.operator.probability
         graph = self.graph
-        for pred in sorted(self._predicates_of(node)):
+        for pred in preds:
             p = float(probability(graph, node, pred))
             if p > best_p:
                 best, best_p = pred, p
@@ -444,7 +489,7 @@ class MapBeliefs:
             for key in counts:  # Counter keeps first-seen order
                 if predicate(key[1]) == pred:
                     return key
-            return None
+            return self._class_named_by(pred)
         if not isinstance(rule, str) and pred in rule:
             name = rule[pred]
             for key in counts:
@@ -456,7 +501,16 @@ class MapBeliefs:
         for key, n in counts.items():  # most frequent; ties keep first-seen order
             if n > best_n and predicate(key[1]) == pred:
                 best, best_n = key, n
-        return best
+        return best if best is not None else self._class_named_by(pred)
+
+    def _class_named_by(self, pred: str) -> tuple[int | None, str] | None:
+        """(class id, name) for a predicate no detection of the node named (the geometric labels
+        committed it): the first class of the class list whose predicate it is."""
+        predicate = self._predicate
+        for cid, name in sorted(self.class_names.items()):
+            if predicate(name) == pred:
+                return (cid, name)
+        return None
 
     def committed_class(self, node: Any) -> tuple[int | None, str] | None:
         """(class id, class name) of the node's committed predicate under ``label_rule``, or None

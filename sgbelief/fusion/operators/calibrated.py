@@ -26,6 +26,7 @@ from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_
     claim_increments,
     evidence_weight,
     kl_upper_bound,
+    label_observations,
     revision_kl_exceeds,
     stance_of,
     stratified_context,
@@ -90,6 +91,8 @@ class CalibratedOperator(BaseOperator):
         self.pair_conformal_: dict[str, ConformalSlice] = {}
         #: claims applied so far per (v, phi), per provenance store (the support of the next claim)
         self._claims: dict[int, tuple[ProvenanceStore, dict[tuple[Any, str], int]]] = {}
+        #: the time of the last label observation per (v, psi), per provenance store (once per frame)
+        self._label_seen: dict[int, tuple[ProvenanceStore, dict[tuple[Any, str], int]]] = {}
 
     @classmethod
     def _settings(cls, config: OperatorConfig) -> OperatorConfig:
@@ -98,8 +101,14 @@ class CalibratedOperator(BaseOperator):
 
     @property
     def observes_geometry(self) -> bool:
-        """A decisive geometric label also enters the belief (comod with ``geometric_evidence: verdict``)."""
-        return self.check_compatibility and self.config.geometric_evidence == "verdict"
+        """A decisive geometric label also enters the belief at the claimed pair (comod with
+        ``geometric_evidence: verdict`` or ``label``)."""
+        return self.check_compatibility and self.config.geometric_evidence in ("verdict", "label")
+
+    @property
+    def observes_label(self) -> bool:
+        """A decisive geometric label also observes the predicates it asserts (``geometric_evidence: label``)."""
+        return self.check_compatibility and self.config.geometric_evidence == "label"
 
     @property
     def claims_property2(self) -> bool:
@@ -132,7 +141,8 @@ class CalibratedOperator(BaseOperator):
             counts = [0, 0, 0, 0, 0]  # targets, below tau_T, committed, quarantined, refused
             for node, mass in event.targets.items():
                 counts[0] += 1
-                y = self._geometric_outcome(channel, node, event)
+                label = self._geometric_label(channel, node, event)
+                y = self._outcome(event.predicate, label)
                 if mass <= self.config.tau_t:  # discarded; its verdict is only reported
                     counts[1] += 1
                     context = self._context(event, self._claims_so_far(graph.provenance, node, event.predicate))
@@ -140,6 +150,8 @@ class CalibratedOperator(BaseOperator):
                     outcomes.append(TargetOutcome(node, mass, v, Action.BELOW_THRESHOLD))
                     continue
                 graph.ensure_node(node)
+                if label is not None and self.observes_label:  # pairs other than (v, phi), before the claim's entries
+                    self._observe_label(graph, event, node, mass, label)
                 action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified)
                 resolutions += res
                 counts[{Action.COMMITTED: 2, Action.QUARANTINED: 3, Action.REFUSED: 4}[action]] += 1
@@ -207,15 +219,28 @@ class CalibratedOperator(BaseOperator):
         lam, _ = self.calibrator_.likelihood_ratio(event.confidence, context, event.predicate)
         return claim_asserts(event.confidence, lam)
 
-    def _geometric_outcome(self, channel: GeometricChannel | None, node: Any, event: EvidenceEvent) -> int | None:
-        """y of the geometric label at (v, t) for the claimed predicate (1, 0, or None: ∅)."""
-        if channel is None or self.vocabulary is None:
+    def _geometric_label(self, channel: GeometricChannel | None, node: Any, event: EvidenceEvent) -> str | None:
+        """The geometric label at (v, t), asked only when the claimed predicate is verifiable."""
+        if channel is None or self.vocabulary is None or event.predicate not in self.vocabulary.outcome_tables():
             return None
-        table = self.vocabulary.outcome_tables().get(event.predicate)
-        if table is None:
+        return channel.label(node, event.t)
+
+    def _outcome(self, predicate: str, label: str | None) -> int | None:
+        """y of a geometric label for ``predicate`` (1, 0, or None: ∅)."""
+        if label is None or self.vocabulary is None:
             return None
-        label = channel.label(node, event.t)
-        return table.get(label) if label is not None else None
+        return self.vocabulary.outcome_tables()[predicate].get(label)
+
+    def _observe_label(self, graph: SceneGraph, event: EvidenceEvent, node: Any, mass: float, label: str) -> None:
+        """``geometric_evidence: label``: the label is one observation (y = 1) of every other
+        predicate it asserts at v (:func:`~sgbelief.fusion.rules.label_observations`), committed
+        under the claim's event id; once per (v, psi, t)."""
+        prov = graph.provenance
+        seen = self._label_seen_of(prov)
+        ga, gb = verification_increments(1, self.config.w0 * mass)
+        for psi in label_observations(self.vocabulary.asserted_by(label), event.predicate, node, event.t, seen):
+            prov.record(node, psi, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1, EntryVerdict.GEOMETRIC,
+                        event.confidence)
 
     def _feed_calibration(self, event: EvidenceEvent, verified: list[tuple[int, str]]) -> None:
         """Alg. 1 line 21: the event's verification outcomes join the buffer after all its targets."""
@@ -238,10 +263,19 @@ class CalibratedOperator(BaseOperator):
         for entry in prov.entries(node, predicate):
             if entry.status is EntryStatus.COMPACTED:
                 n += entry.n_folded
+            elif entry.verdict is EntryVerdict.GEOMETRIC:
+                continue  # an observation, not a claim (a claim's own entry carries the same id)
             elif entry.event_id not in ids:
                 ids.add(entry.event_id)
                 n += 1
         return n
+
+    def _label_seen_of(self, prov: ProvenanceStore) -> dict[tuple[Any, str], int]:
+        """(v, psi) -> the last time a label observation was recorded there, per provenance store."""
+        held = self._label_seen.get(id(prov))
+        if held is None or held[0] is not prov:
+            held = self._label_seen[id(prov)] = (prov, {})
+        return held[1]
 
     def _claims_so_far(self, prov: ProvenanceStore, node: Any, predicate: str) -> int:
         """Claims applied at (v, phi) so far (counted from the log the first time a pair is seen)."""
@@ -301,6 +335,7 @@ class CalibratedOperator(BaseOperator):
         toward their pairs' support."""
         retracted = super().retract(graph, event_id)
         self._claims.pop(id(graph.provenance), None)  # recounted from the logs on next use
+        self._label_seen.pop(id(graph.provenance), None)
         return retracted
 
 
@@ -312,7 +347,10 @@ class CoModulatedOperator(CalibratedOperator):
     (Property 2). A later ⊤ at the same (v, phi) within T_disagree resolves it without
     committing it; otherwise it expires after T_disagree; an explicit confirmation may override.
     With ``geometric_evidence: verdict`` (the default) the decisive geometric label itself is one
-    observation of y at (v, phi), committed under the claim's event id (docs/method.md).
+    observation of y at (v, phi), committed under the claim's event id; with ``label`` (the
+    ConceptGraphs backend's default) it is also one observation (y = 1) of each other predicate the
+    label asserts at v, once per (v, psi, t), so a sofa the detector keeps calling ``tv`` is
+    observed as a sofa (docs/method.md §3).
     """
 
     name = "comod"
