@@ -65,22 +65,17 @@ def test_a_sofa_called_tv_is_committed_as_a_sofa(table: SubsumptionTable, engine
     assert [e.event_id for e in entries] == [f"e{t}" for t in range(6)]
 
 
-@pytest.mark.parametrize("setting", ["verdict", "none", None])
-def test_other_settings_leave_the_label_s_own_predicate_alone(table: SubsumptionTable, setting: str | None) -> None:
-    """``verdict`` (the operator default, ``None`` here) and ``none`` observe the claimed pair only."""
-    op = make_operator("comod", None if setting is None else {"geometric_evidence": setting}, table)
+@pytest.mark.parametrize(("name", "config"), [("comod", {"geometric_evidence": "verdict"}),
+                                              ("comod", {"geometric_evidence": "none"}),
+                                              ("comod", None), ("cal", LABEL)])
+def test_other_settings_leave_the_label_s_own_predicate_alone(table: SubsumptionTable, name: str, config) -> None:
+    """``verdict`` (the operator default) and ``none`` observe the claimed pair only; ``cal`` uses
+    the channel only to calibrate, whatever ``geometric_evidence`` says."""
+    op = make_operator(name, config, table)
     assert not op.observes_label
+    assert op.observes_geometry == (name == "comod" and config != {"geometric_evidence": "none"})
     g = SceneGraph(create_nodes=True)
     for event, labels in _tv_claims(4):
-        op.update(g, event, labels)
-    assert ("v", "is_sofa") not in g.provenance
-
-
-def test_cal_never_observes_the_label(table: SubsumptionTable) -> None:
-    op = make_operator("cal", LABEL, table)
-    assert not op.observes_label and not op.observes_geometry
-    g = SceneGraph(create_nodes=True)
-    for event, labels in _tv_claims(3):
         op.update(g, event, labels)
     assert ("v", "is_sofa") not in g.provenance
 
