@@ -43,6 +43,10 @@ QUICK = {
 }
 
 
+#: RESULTS.md below this line is written by hand (measurements no script here reproduces alone); kept
+HAND_WRITTEN = "<!-- hand-written sections below: run_all.py keeps them -->"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
@@ -79,7 +83,11 @@ def main() -> int:
     for name, r in results.items():
         lines += [f"## {name}", "", f"`{r['command']}` (wall {r['wall_s']} s)", "", "```json",
                   json.dumps(r["result"], indent=1), "```", ""]
-    Path(args.out).write_text("\n".join(lines))
+    out = Path(args.out)
+    kept = out.read_text().partition(HAND_WRITTEN)[2] if out.exists() else ""
+    if kept:  # the hand-written sections (ConceptGraphs harness, ...) survive a re-run
+        lines += [HAND_WRITTEN + kept.rstrip("\n"), ""]
+    out.write_text("\n".join(lines))
     (HERE / "results.json").write_text(json.dumps({"machine": m, "results": results}, indent=1))
     print(f"[run_all] wrote {args.out}")
     return 0
