@@ -10,7 +10,8 @@ import yaml
 from sgbelief.errors import ConfigError
 from sgbelief.eval.formats import read_events, read_nodes, read_truth
 from sgbelief.eval.sim_config import load_sim_config, load_vocabulary
-from sgbelief.eval.simulate import most_contradicted, simulate, suite_statistics
+from sgbelief.eval.sim_diagnostics import most_contradicted, suite_statistics
+from sgbelief.eval.simulate import simulate
 
 
 @pytest.fixture(scope="module")
