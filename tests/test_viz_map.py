@@ -228,7 +228,7 @@ def test_show_cli_on_a_scannet_map(tmp_path: Path, capsys: pytest.CaptureFixture
     (tmp_path / "events.jsonl").write_text("\n".join(lines) + "\n")
     (tmp_path / "truth.json").write_text(json.dumps({"scene0001_00/2": {"is_chair": 1}}))
     assert main(["replay", str(tmp_path / "events.jsonl"), "--truth", str(tmp_path / "truth.json"), "--vocab",
-                 str(Path(__file__).parents[1] / "configs" / "vocab" / "scannet.yaml"), "--operators", "comod",
+                 str(Path(__file__).parents[1] / "sgbelief" / "configs" / "vocab" / "scannet.yaml"), "--operators", "comod",
                  "--save-graph", str(tmp_path / "maps"), "--no-progress"]) == 0
     capsys.readouterr()
     assert main(["show", str(tmp_path / "maps" / "comod"), "--out", str(tmp_path / "m.png")]) == 1  # ids only

@@ -400,7 +400,7 @@ class ScanNetChannel:
     KDTreeFlann) within ``max_distance`` metres vote; if fewer than ``min_annotated`` (fraction) of
     the votes are annotated vertices, or no vertex is within range, the answer is None; otherwise
     the majority annotated label (in ``label_space``, default NYU40 names as used by
-    ``configs/vocab/scannet.yaml``). Ties break alphabetically. At most ``max_points`` query points
+    ``sgbelief/configs/vocab/scannet.yaml``). Ties break alphabetically. At most ``max_points`` query points
     are used (an evenly strided subsample).
 
     ``label(node, t)``: the points registered with :meth:`set_points` for the node, else the

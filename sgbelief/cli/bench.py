@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--operators", default=",".join(OPERATOR_NAMES),
                    help="comma-separated fusion operators (default: %(default)s)")
     p.add_argument("--config", type=Path, default=None,
-                   help="operator config YAML (default: configs/operators/default.yaml)")
+                   help="operator config YAML (default: sgbelief/configs/operators/default.yaml)")
     p.add_argument("--fm-source", choices=["parametric", "detector_records"], default=None,
                    help="draw the foundation-model channel's (score, correct) pairs from real detector records "
                         "(default: the suite config's choice, parametric)")
@@ -83,7 +83,7 @@ def run_grid_command(args: argparse.Namespace) -> int:
     finally:
         bar.close()
     summary = summarize(rows)
-    note = f"`{args.config}`" if args.config else "the shipped default (configs/operators/default.yaml)"
+    note = f"`{args.config}`" if args.config else "the shipped default (sgbelief/configs/operators/default.yaml)"
     md = "# sgbelief robustness grid\n\n" + render_grid(summary, seeds=seeds, config_note=note)
     args.out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(args.out / "grid.md", md)

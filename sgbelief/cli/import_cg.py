@@ -13,9 +13,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("result", help="ConceptGraphs map (pcd_saves/full_pcd_*.pkl.gz or pcd_*.pkl.gz)")
     parser.add_argument("--operator", default="comod", help="fusion operator (default: comod)")
     parser.add_argument("--vocab", default=None,
-                        help="class-name vocabulary YAML (default: configs/conceptgraphs/scannet.yaml)")
+                        help="class-name vocabulary YAML (default: sgbelief/configs/conceptgraphs/scannet.yaml)")
     parser.add_argument("--context", default="conceptgraphs", help="context tag kappa of the events (default: %(default)s)")
-    parser.add_argument("--operator-config", default=None, help="operator config YAML (default: configs/operators/default.yaml)")
+    parser.add_argument("--operator-config", default=None, help="operator config YAML (default: sgbelief/configs/operators/default.yaml)")
     parser.add_argument("--out", default="results/import-cg", help="output directory for graph.json (or graph.npz) and labels.json (default: %(default)s)")
     parser.add_argument("--channel", default=None, metavar="SCENE_DIR",
                         help="geometric channel: ScanNet mesh labels (NYU40) of this ScanNet scene folder, "

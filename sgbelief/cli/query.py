@@ -12,7 +12,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="saved graph: a directory holding graph.json or graph.npz, or a .json / .npz file")
     parser.add_argument("query", metavar="EXPR_OR_NAME",
                         help='e.g. "is_chair & is_near_window & !is_on_top_of", or a named query '
-                             '("chair near window", chair_near_window; see configs/queries/)')
+                             '("chair near window", chair_near_window; see sgbelief/configs/queries/)')
     parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold: a node is retrieved when P > tau, strictly (the commit rule of "
                              "inspect and committed()); default: %(default)s")
     parser.add_argument("--json", action="store_true", help="print the result as JSON (default: a table)")

@@ -24,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--nodes", type=Path, default=None,
                    help="nodes.json with the objects' boxes, tracks and the ego trajectory (default: nodes.json beside "
                         "the events file, when there is one)")
-    p.add_argument("--config", type=Path, default=None, help="operator config YAML (default: configs/operators/default.yaml)")
+    p.add_argument("--config", type=Path, default=None, help="operator config YAML (default: sgbelief/configs/operators/default.yaml)")
     p.add_argument("--tau", type=float, default=0.5,
                    help="commit threshold of the box labels and scores: committed when P > tau (default: %(default)s)")
     p.add_argument("--skip-bad-lines", action="store_true",

@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", type=Path, required=True, help="truth.json {node: {predicate: 0|1}}")
     p.add_argument("--vocab", required=True, help="vocabulary YAML (subsumption table) or a shipped name: scannet, kitti360")
     p.add_argument("--operators", default=",".join(OPERATOR_NAMES), help="comma-separated operator names (default: %(default)s)")
-    p.add_argument("--config", type=Path, default=None, help="operator config YAML (default: configs/operators/default.yaml)")
+    p.add_argument("--config", type=Path, default=None, help="operator config YAML (default: sgbelief/configs/operators/default.yaml)")
     p.add_argument("--json", type=Path, default=None, dest="json_out", help="write metrics per operator as JSON (default: none)")
     p.add_argument("--save-graph", type=Path, default=None, help="save each operator's final graph under DIR/<operator>/ (default: not saved)")
     p.add_argument("--nodes", type=Path, default=None,

@@ -31,7 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="named-query set: scannet | kitti360 | a YAML file (default: the vocabulary's)")
     parser.add_argument("--operators", default="overwrite,majority,naive_bayes,refined,cal,comod",
                         help="comma-separated operator names (default: all six)")
-    parser.add_argument("--operator-config", metavar="YAML", default=None, help="operator configuration file (default: configs/operators/default.yaml)")
+    parser.add_argument("--operator-config", metavar="YAML", default=None, help="operator configuration file (default: sgbelief/configs/operators/default.yaml)")
     parser.add_argument("--channel", choices=("scannet", "recorded"), default="scannet",
                         help="ScanNet geometric channel: mesh labels (default) or the events' recorded labels")
     parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold: retrieved when P > tau, strictly (default: %(default)s)")

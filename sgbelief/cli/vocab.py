@@ -13,8 +13,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                        "predicate, the geometric labels that corroborate it (T), contradict it "
                                        "(⊥) or decide nothing (∅).")
     check.add_argument("vocab", help="class list (.txt one name a line, .yaml/.json list), a shipped list "
-                                     "(scannet200, coco80, nyu40), a configs/conceptgraphs vocabulary YAML, "
-                                     "or a configs/vocab subsumption table")
+                                     "(scannet200, coco80, nyu40), a sgbelief/configs/conceptgraphs vocabulary YAML, "
+                                     "or a sgbelief/configs/vocab subsumption table")
     check.add_argument("--taxonomy", default="indoor", help="taxonomy YAML or shipped name (default: indoor)")
     check.add_argument("--mapping", default=None,
                        help="label mapping YAML or shipped name (scannet200_nyu40, coco80_nyu40): the channel's labels")

@@ -344,10 +344,10 @@ def run_bench(
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    config_note = "the shipped default (configs/operators/default.yaml)" if config is None else "a user config"
+    config_note = "the shipped default (sgbelief/configs/operators/default.yaml)" if config is None else "a user config"
     config = config or OperatorConfig.default()
     if config == OperatorConfig.default():
-        config_note = "the shipped default (configs/operators/default.yaml)"
+        config_note = "the shipped default (sgbelief/configs/operators/default.yaml)"
     started = time.perf_counter()
     results: dict[str, Any] = {"meta": {"seed": seed, "suites": list(suites), "operators": list(operators),
                                         "python": platform.python_version(), "machine": platform.machine(),

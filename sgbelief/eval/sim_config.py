@@ -1,4 +1,4 @@
-"""Pydantic models of the simulator configuration (``configs/sim/*.yaml``); see docs/simulation.md."""
+"""Pydantic models of the simulator configuration (``sgbelief/configs/sim/*.yaml``); see docs/simulation.md."""
 
 from __future__ import annotations
 
@@ -170,7 +170,7 @@ class SimConfig(_M):
     version: Literal[1] = 1
     name: str
     kind: Literal["outdoor", "indoor"]
-    vocabulary: str = Field(description="vocabulary name (configs/vocab/<name>.yaml) or path")
+    vocabulary: str = Field(description="vocabulary name (sgbelief/configs/vocab/<name>.yaml) or path")
     scenes: list[str] = Field(min_length=1)
     evaluated_predicates: list[str] = Field(min_length=1)
     time_gap: int = Field(ge=0, description="empty time steps between consecutive scenes")
@@ -256,7 +256,7 @@ def _check_labels(cfg: SimConfig, vocab: dict[str, Any]) -> None:
 
 
 def load_sim_config(name_or_path: str | os.PathLike[str], **overrides: Any) -> SimConfig:
-    """Load ``configs/sim/<name>.yaml`` (or a path); ``overrides`` replace top-level keys.
+    """Load ``sgbelief/configs/sim/<name>.yaml`` (or a path); ``overrides`` replace top-level keys.
 
     Errors raise :class:`ConfigError` naming the offending key.
     """

@@ -1,6 +1,6 @@
 """The compatibility predicate compat(phi_f, phi_g) in {T, ⊥, ∅} from a subsumption table (§4.2).
 
-A table is written by hand (``configs/vocab/*.yaml``, :meth:`SubsumptionTable.from_yaml`) or derived
+A table is written by hand (``sgbelief/configs/vocab/*.yaml``, :meth:`SubsumptionTable.from_yaml`) or derived
 from a detector class list by :func:`sgbelief.fusion.open_vocab.derive_table`, which builds it from
 this module's types (:meth:`SubsumptionTable.from_specs`); this module does not know that one.
 """
@@ -192,7 +192,7 @@ class SubsumptionTable:
 
     @classmethod
     def shipped(cls, name: str) -> SubsumptionTable:
-        """One of the vocabularies in ``configs/vocab`` (``scannet``, ``kitti360``)."""
+        """One of the vocabularies in ``sgbelief/configs/vocab`` (``scannet``, ``kitti360``)."""
         from sgbelief.resources import config_path
 
         return cls.from_yaml(config_path("vocab", f"{name}.yaml"))

@@ -123,7 +123,7 @@ class OperatorConfig(_Frozen):
 
     @classmethod
     def default(cls) -> OperatorConfig:
-        """The shipped ``configs/operators/default.yaml`` (equal to the code defaults)."""
+        """The shipped ``sgbelief/configs/operators/default.yaml`` (equal to the code defaults)."""
         from sgbelief.resources import config_path
 
         try:

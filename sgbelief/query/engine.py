@@ -422,7 +422,7 @@ def run_query(graph: SceneGraph, expr: str | Compound, tau: float = 0.5, registr
               config: RelationConfig | None = None, require_evidence: bool = True,
               include_all: bool = False, limit: int | None = None) -> QueryResult:
     """Answer one compound query: ``expr`` is an expression, a :class:`Compound`, or the name /
-    title of a named query (``configs/queries/*.yaml``; its ``relations`` thresholds apply unless
+    title of a named query (``sgbelief/configs/queries/*.yaml``; its ``relations`` thresholds apply unless
     ``config`` is given). Returns a ranked, self-explaining :class:`QueryResult`."""
     name = None
     if isinstance(expr, str):

@@ -1,4 +1,4 @@
-"""Named compound queries (``configs/queries/<dataset>.yaml``).
+"""Named compound queries (``sgbelief/configs/queries/<dataset>.yaml``).
 
 File format (``format: sgbelief.queries``, ``version: 1``)::
 
@@ -39,7 +39,7 @@ class UnknownNamedQueryError(SgbeliefError, LookupError):
         self.text = text
         self.suggestions = suggestions
         hint = f"; did you mean {', '.join(repr(s) for s in suggestions)}?" if suggestions else \
-            "; see configs/queries/*.yaml for the named queries, or write an expression such as 'is_car & is_stationary'"
+            "; see sgbelief/configs/queries/*.yaml for the named queries, or write an expression such as 'is_car & is_stationary'"
         super().__init__(f"no such named query {text!r}{hint}")
 
 

@@ -32,7 +32,7 @@ class ConceptGraphsBackend(MapBeliefs):
 
     Args:
         operator: operator name (``comod``, ``cal``, ``majority``, ...) or a FusionOperator instance.
-        vocabulary: a :class:`ClassVocabulary`, a path to ``configs/conceptgraphs/*.yaml`` or None
+        vocabulary: a :class:`ClassVocabulary`, a path to ``sgbelief/configs/conceptgraphs/*.yaml`` or None
             (shipped ScanNet vocabulary).
         context: the context tag kappa (detector / VLM and prompt version) of every event.
         channel: optional geometric channel: a GeometricChannel (``label(node, t)``), or a callable

@@ -1,4 +1,4 @@
-"""ConceptGraphs class names -> sgbelief predicates (configs/conceptgraphs/*.yaml)."""
+"""ConceptGraphs class names -> sgbelief predicates (sgbelief/configs/conceptgraphs/*.yaml)."""
 
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ class ClassVocabulary:
     # ---- construction -------------------------------------------------------------------
     @classmethod
     def from_yaml(cls, path: str | Path) -> ClassVocabulary:
-        """Load a ``configs/conceptgraphs/*.yaml`` file (or a bare ``configs/vocab/*.yaml`` table)."""
+        """Load a ``sgbelief/configs/conceptgraphs/*.yaml`` file (or a bare ``sgbelief/configs/vocab/*.yaml`` table)."""
         from sgbelief.resources import config_dir
 
         path = Path(path)
@@ -125,7 +125,7 @@ class ClassVocabulary:
 
     @classmethod
     def default(cls) -> ClassVocabulary:
-        """The shipped ScanNet vocabulary (``configs/conceptgraphs/scannet.yaml``)."""
+        """The shipped ScanNet vocabulary (``sgbelief/configs/conceptgraphs/scannet.yaml``)."""
         from sgbelief.resources import config_path
 
         return cls.from_yaml(config_path("conceptgraphs", "scannet.yaml"))
