@@ -18,7 +18,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from sgbelief.errors import ConfigError, FormatError, UnknownPredicateError
+from sgbelief.errors import ConfigError, FormatError, SgbeliefDeprecationWarning, UnknownPredicateError
 
 
 class Verdict(str, Enum):
@@ -186,7 +186,7 @@ class SubsumptionTable:
         derives a table from a detector class list, a taxonomy and an optional label mapping."""
         home, name_there = _FROM_CLASS_LIST_HOME
         warnings.warn(f"SubsumptionTable.from_class_list is deprecated; use {home}.{name_there}",
-                      DeprecationWarning, stacklevel=2)
+                      SgbeliefDeprecationWarning, stacklevel=2)
         derive = getattr(importlib.import_module(home), name_there)  # a deprecated alias: no import arrow
         return derive(classes, taxonomy, mapping, ignore=ignore, name=name)  # type: ignore[no-any-return]
 
