@@ -70,11 +70,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SgbeliefError as exc:
         print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
         return 1
-    except FileNotFoundError as exc:
-        print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
+    except OSError as exc:  # a file that is not there, or cannot be read or written
+        if exc.filename is None and not isinstance(exc, FileNotFoundError):
+            raise
+        print(f"sgbelief {name}: error: {_os_error(exc)}", file=sys.stderr)
         return 1
     finally:
         unroute_messages(handler)
+
+
+def _os_error(exc: OSError) -> str:
+    """One line naming the file: ``events.jsonl: no such file or directory`` (not ``[Errno 2] ...``)."""
+    if exc.filename is None or exc.strerror is None:  # raised with a message of its own
+        return str(exc)
+    return f"{exc.filename}: {exc.strerror[:1].lower()}{exc.strerror[1:]}"
 
 
 def _silence_stdout() -> None:

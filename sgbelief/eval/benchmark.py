@@ -477,7 +477,8 @@ def _jsonable(x: Any) -> Any:
 
 # --------------------------------------------------------------------------- markdown
 def _f(x: Any, d: int = 3) -> str:
-    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{d}f}"
+    """A number as the tables print it; n/a where it is undefined (nan, or None once in JSON)."""
+    return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{d}f}"
 
 
 def _summary_table(results: dict[str, Any]) -> list[str]:
@@ -526,6 +527,11 @@ def render_markdown(results: dict[str, Any]) -> str:
                 lines.append(f"| {name_} | " + " | ".join(f"{_f(pp[p]['iou'])} ({_f(pp[p]['precision'], 2)} / "
                                                           f"{_f(pp[p]['recall'], 2)})" for p in preds)
                              + f" | {_f(sc['mean_iou'])} | {_f(sc['brier'], 4)} | {sc['refusals']} |")
+            first = next(iter(res[key].values()))["per_predicate"]
+            empty = [p for p in preds if first[p]["tp"] + first[p]["fn"] == 0]
+            if empty:
+                lines.append(f"\nn/a: {', '.join(empty)} {'has' if len(empty) == 1 else 'have'} no positives in this "
+                             "suite's truth, so IoU and recall are undefined there; left out of the mean IoU.")
             lines.append("")
         if "table5" in res:
             t5 = res["table5"]
@@ -571,6 +577,8 @@ def render_markdown(results: dict[str, Any]) -> str:
                 first = next(iter(row.values()))
                 lines.append(f"| {q} | {first['n']} | {100 * first['pos_rate']:.1f} | "
                              + " | ".join(_f(row[o]["f1"]) if o in row else "–" for o in ops) + " |")
+            if any(r["positives"] == 0 for r in res["retrieval"]):
+                lines.append("\nn/a: a compound with no positives in its pool has no F1.")
         elif "retrieval_error" in res:
             lines += ["", f"Retrieval table not produced: {res['retrieval_error']}"]
         lines.append("")

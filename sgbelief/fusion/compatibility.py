@@ -192,9 +192,14 @@ class SubsumptionTable:
 
     @classmethod
     def shipped(cls, name: str) -> SubsumptionTable:
-        """One of the vocabularies in ``sgbelief/configs/vocab`` (``scannet``, ``kitti360``)."""
-        from sgbelief.resources import config_path
+        """One of the vocabularies in ``sgbelief/configs/vocab`` (``scannet``, ``kitti360``); an
+        unknown name is a :class:`ConfigError` listing the shipped ones."""
+        from sgbelief.resources import config_dir, config_path
 
+        known = sorted(p.stem for p in (config_dir() / "vocab").glob("*.yaml"))
+        if name not in known:
+            raise ConfigError(f"unknown vocabulary {name!r}: give a vocabulary YAML file or a shipped name "
+                              f"({', '.join(known) or 'none found under ' + str(config_dir() / 'vocab')})")
         return cls.from_yaml(config_path("vocab", f"{name}.yaml"))
 
     @classmethod
