@@ -55,12 +55,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=f"sgbelief {name}", description=COMMANDS[name][1])
     module.add_arguments(parser)
     args = parser.parse_args(rest)
+    import warnings
+
     from sgbelief.cli._console import route_messages, unroute_messages
-    from sgbelief.errors import SgbeliefError
+    from sgbelief.errors import SgbeliefError, SgbeliefWarning
 
     handler = route_messages(name)
     try:
-        rc = int(module.run(args) or 0)
+        with warnings.catch_warnings():
+            # a command's own warnings are messages to its user: each one a line on stderr, whatever
+            # the interpreter's filters (a test suite that makes them errors reads them there)
+            warnings.simplefilter("always", SgbeliefWarning)
+            rc = int(module.run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit flush
         return rc
     except BrokenPipeError:
