@@ -27,9 +27,9 @@ def _command_rows() -> list[tuple[str, str]]:
 class _Recorder(argparse.ArgumentParser):
     """A parser that keeps the actions its command adds (options added to groups are not seen)."""
 
-    def __init__(self) -> None:
+    def __init__(self, **kwargs: object) -> None:  # subcommand parsers are made with keywords
         self.recorded: list[argparse.Action] = []
-        super().__init__()
+        super().__init__(**kwargs)  # type: ignore[arg-type]
 
     def add_argument(self, *args, **kwargs):  # type: ignore[no-untyped-def]
         action = super().add_argument(*args, **kwargs)
