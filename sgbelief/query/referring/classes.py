@@ -8,8 +8,11 @@ finds "shelf"). So a scene holding both "cabinet" and "cabinets" (distinct ScanN
 them apart, and a plural in the utterance still finds a singular label when nothing closer exists.
 
 On a belief map a node without a matching ``label`` is a member with the posterior mean of its
-``is_<class>`` belief (the predicate matched by the same keys) when it has evidence on it; a node
-with neither a matching label nor evidence is not a member (probability 0).
+``is_<class>`` belief (the predicate matched by the same keys) when that belief is committed (mean
+strictly above ``commit_tau``, 0.5: the map's own decision), at ``o / (1 + sum_c o_c)`` with ``o``
+the odds of that belief and ``o_c`` those of every class belief of the node (classes exclude each
+other; a node committed to one class only keeps its posterior mean); a node with neither a
+matching label nor a committed belief is not a member (probability 0).
 """
 
 from __future__ import annotations
@@ -188,9 +191,28 @@ class NodeTable:
             self._beliefs[predicate] = hit
         return hit
 
-    def members(self, name: str, scene: Any, *, use_beliefs: bool = True) -> Membership:
+    def _exclusive(self, i: int, predicate: str, mean: float) -> float:
+        """P(node i is of the predicate's class) when classes exclude each other: each class belief
+        ``b_c`` of the node (every ``is_*`` with evidence) is read as odds ``b_c / (1 - b_c)`` for its
+        class against "none of them", so ``P = o / (1 + sum_c o_c)`` (= ``b`` when it is the node's
+        only class belief)."""
+        beliefs = getattr(self.graph, "beliefs", None)
+        if beliefs is None:
+            return mean
+        odds = 0.0
+        for pred, b in beliefs(self.nodes[i]).items():
+            if pred.startswith("is_"):
+                m = min(float(b.mean), 1.0 - 1e-9)
+                odds += m / (1.0 - m)
+        m = min(mean, 1.0 - 1e-9)
+        own = m / (1.0 - m)
+        odds = max(odds, own)
+        return own / (1.0 + odds)
+
+    def members(self, name: str, scene: Any, *, use_beliefs: bool = True, commit_tau: float = 0.5) -> Membership:
         """The class's members in ``scene``: labelled nodes (exact tier, else plural tier) with
-        P = 1, plus nodes with evidence on a matching ``is_<class>`` belief at its posterior mean."""
+        P = 1, plus nodes whose matching ``is_<class>`` belief is committed (posterior mean
+        strictly above ``commit_tau``), at that posterior mean."""
         key, skey = class_key(name), singular_key(name)
         empty = np.zeros(0, dtype=np.intp)
         ix = self._exact.get(key, {}).get(scene, empty)
@@ -207,8 +229,8 @@ class NodeTable:
                         continue
                     if in_scene is None:
                         in_scene = set(self.scene_nodes.get(scene, np.zeros(0, dtype=np.intp)).tolist())
-                    if i in in_scene and m > 0.0:
-                        p[i] = max(m, p.get(i, 0.0))
+                    if i in in_scene and m > commit_tau:
+                        p[i] = max(self._exclusive(i, pred, m), p.get(i, 0.0))
             if len(p) > len(ix):
                 tier = tier if len(ix) else "belief"
         order = np.asarray(sorted(p), dtype=np.intp)
@@ -216,7 +238,7 @@ class NodeTable:
         keep = self.has_box[order] if len(order) else np.zeros(0, dtype=bool)
         return Membership(order[keep], probs[keep], tier)
 
-    def scenes_with(self, names: list[str], *, use_beliefs: bool = True) -> list[Any]:
+    def scenes_with(self, names: list[str], *, use_beliefs: bool = True, commit_tau: float = 0.5) -> list[Any]:
         """Scenes in which every class name has at least one member, in order of first appearance."""
         found: set[Any] | None = None
         for name in names:
@@ -224,9 +246,9 @@ class NodeTable:
             mine = set(self._exact.get(key, {})) | set(self._plural.get(skey, {}))
             if use_beliefs:
                 for pred in self.belief_predicates(name):
-                    mine.update(self.scenes[i] for i, m in self._belief_means(pred).items() if m > 0.0)
+                    mine.update(self.scenes[i] for i, m in self._belief_means(pred).items() if m > commit_tau)
             found = mine if found is None else found & mine
         if not found:
             return []
         return [s for s in self.scene_nodes if s in found
-                and all(len(self.members(n, s, use_beliefs=use_beliefs)) for n in names)]
+                and all(len(self.members(n, s, use_beliefs=use_beliefs, commit_tau=commit_tau)) for n in names)]

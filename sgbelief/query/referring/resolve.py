@@ -53,9 +53,9 @@ def refer(graph: Any, query: ReferringQuery | str, *, scene: Any = _MISSING, ind
             raise ReferError(f"refer: scene {scene!r} holds no node of this graph; scenes: {shown}")
         scenes = [scene]
     else:
-        scenes = table.scenes_with(classes, use_beliefs=use_beliefs)
+        scenes = table.scenes_with(classes, use_beliefs=use_beliefs, commit_tau=cfg.commit_tau)
         if not scenes:
-            missing = [c for c in classes if not table.scenes_with([c], use_beliefs=use_beliefs)]
+            missing = [c for c in classes if not table.scenes_with([c], use_beliefs=use_beliefs, commit_tau=cfg.commit_tau)]
             if missing:
                 why = "no node of class " + ", ".join(repr(c) for c in missing)
             else:
@@ -63,8 +63,8 @@ def refer(graph: Any, query: ReferringQuery | str, *, scene: Any = _MISSING, ind
             return _empty(q, None, why)
     best: tuple[ReferAnswer, float] | None = None
     for s in scenes:
-        target = table.members(q.target, s, use_beliefs=use_beliefs)
-        anchors = [table.members(a, s, use_beliefs=use_beliefs) for a in q.anchors]
+        target = table.members(q.target, s, use_beliefs=use_beliefs, commit_tau=cfg.commit_tau)
+        anchors = [table.members(a, s, use_beliefs=use_beliefs, commit_tau=cfg.commit_tau) for a in q.anchors]
         if not len(target) or not all(len(a) for a in anchors):
             missing = [c for c, m in zip(classes, [target, *anchors]) if not len(m)]
             ans = _empty(q, s, "no node of class " + ", ".join(repr(c) for c in missing) + f" in scene {s!r}")

@@ -59,6 +59,7 @@ class ReferConfig:
     width_occupancy: float = 0.12
     relaxed_vertical: float = 0.5     # weight of "over / under the anchor" when the stated vertical relation fails
     max_anchor_hypotheses: int = 64
+    commit_tau: float = 0.5           # a belief counts towards class membership above this (the commit rule)
     sections: SectionConfig = field(default_factory=SectionConfig)
 
 
