@@ -177,7 +177,7 @@ def front_hypotheses(table: NodeTable, scene: Any, anchor: int,
         fx, fy = table.fronts[anchor]
         n = math.hypot(fx, fy)
         return [FrontHypothesis((fx / n, fy / n), 1.0, "front attribute")]
-    scene_ix = table.scene_nodes.get(scene, np.zeros(0, dtype=np.intp))
+    scene_ix = table.load_scene(scene)
     ok = scene_ix[table.has_box[scene_ix]]
     bounds = (np.min(table.lo[ok], axis=0), np.max(table.hi[ok], axis=0)) if len(ok) else (table.lo[anchor], table.hi[anchor])
     walls = np.asarray([j for j in ok.tolist() if table.skeys[j] in WALLS], dtype=np.intp)

@@ -87,14 +87,77 @@ class NodeTable:
     def __init__(self, graph: Any, nodes: list[Any], attrs: list[Mapping[str, Any]]) -> None:
         self.graph = graph
         self.nodes = nodes
+        self._attrs = attrs
         n = len(nodes)
-        lo = np.full((n, 3), np.nan)
-        hi = np.full((n, 3), np.nan)
+        self.scenes: list[Any] = [a.get("scene") for a in attrs]
+        # labels, keys and boxes are read per scene, when a query first looks at it
+        self.labels: list[str | None] = [None] * n
+        self.keys: list[str] = [""] * n
+        self.skeys: list[str] = [""] * n
+        self.lo = np.full((n, 3), np.nan)
+        self.hi = np.full((n, 3), np.nan)
+        self.has_box = np.zeros(n, dtype=bool)
+        self.fronts: dict[int, tuple[float, float]] = {}
+        self._loaded: set[Any] = set()
+        self._scene_ix: dict[Any, np.ndarray] = {}
+        self._all_scenes: dict[Any, np.ndarray] | None = None
+        self._position: dict[Any, int] | None = None
+        self._key_of: dict[str, tuple[str, str]] = {}
+        #: label key -> scenes holding it (and the same by singular key), built at the first search
+        self._key_scenes: tuple[dict[str, set[Any]], dict[str, set[Any]]] | None = None
+        self._beliefs: dict[str, dict[int, float]] = {}
+        self._belief_preds: dict[str, list[str]] = {}
+        self._all_preds: list[str] | None = None
+
+    @property
+    def scene_nodes(self) -> dict[Any, np.ndarray]:
+        """Scene -> its node indices, every scene (in order of first appearance)."""
+        if self._all_scenes is None:
+            groups: dict[Any, list[int]] = {}
+            for i, s in enumerate(self.scenes):
+                groups.setdefault(s, []).append(i)
+            self._all_scenes = {s: np.asarray(ix, dtype=np.intp) for s, ix in groups.items()}
+            self._scene_ix.update(self._all_scenes)
+        return self._all_scenes
+
+    @property
+    def position(self) -> dict[Any, int]:
+        if self._position is None:
+            self._position = {node: i for i, node in enumerate(self.nodes)}
+        return self._position
+
+    def has_scene(self, scene: Any) -> bool:
+        return len(self.scene_index(scene)) > 0
+
+    def scene_index(self, scene: Any) -> np.ndarray:
+        """The scene's node indices (cached)."""
+        ix = self._scene_ix.get(scene)
+        if ix is None:
+            ix = self._scene_ix[scene] = np.asarray([i for i, s in enumerate(self.scenes) if s == scene], dtype=np.intp)
+        return ix
+
+    def _read_labels(self, rows: list[int]) -> None:
+        key_of = self._key_of
+        for i in rows:
+            lab = self._attrs[i].get("label")
+            if lab is None:
+                continue
+            lab = str(lab)
+            ks = key_of.get(lab)
+            if ks is None:
+                ks = key_of[lab] = (class_key(lab), singular_key(lab))
+            self.labels[i] = lab
+            self.keys[i], self.skeys[i] = ks
+
+    def load_scene(self, scene: Any) -> np.ndarray:
+        """Read the labels, boxes (and ``front`` attributes) of one scene's nodes, once; its node indices."""
+        ix = self.scene_index(scene)
+        if scene in self._loaded:
+            return ix
+        self._loaded.add(scene)
         rows, boxes, crow, cents = [], [], [], []
-        labels: list[str | None] = []
-        scenes: list[Any] = []
-        fronts: dict[int, tuple[float, float]] = {}
-        for i, a in enumerate(attrs):
+        for i in ix.tolist():
+            a = self._attrs[i]
             b = a.get("bbox")
             if b is not None:
                 rows.append(i)
@@ -102,9 +165,6 @@ class NodeTable:
             elif (c := a.get("centroid")) is not None:
                 crow.append(i)
                 cents.append(c)
-            lab = a.get("label")
-            labels.append(None if lab is None else str(lab))
-            scenes.append(a.get("scene"))
             f = a.get("front")
             if f is not None:
                 try:
@@ -112,41 +172,17 @@ class NodeTable:
                 except (TypeError, ValueError, IndexError):
                     fx = fy = 0.0
                 if fx or fy:
-                    fronts[i] = (fx, fy)
-        fill_boxes(lo, hi, rows, boxes, True)
-        fill_boxes(lo, hi, crow, cents, False)
-        self.lo, self.hi = lo, hi
-        self.has_box = ~np.isnan(lo).any(axis=1)
-        self.labels = labels
-        self.scenes = scenes
-        self.fronts = fronts
-        key_of: dict[str | None, tuple[str, str]] = {}
-        keys, skeys = [], []
-        for lab in labels:
-            ks = key_of.get(lab)
-            if ks is None:
-                ks = key_of[lab] = ("", "") if lab is None else (class_key(lab), singular_key(lab))
-            keys.append(ks[0])
-            skeys.append(ks[1])
-        self.keys = keys
-        self.skeys = skeys
-        self.position = {node: i for i, node in enumerate(nodes)}
-        groups: dict[Any, list[int]] = {}
-        for i, s in enumerate(scenes):
-            groups.setdefault(s, []).append(i)
-        self.scene_nodes = {s: np.asarray(ix, dtype=np.intp) for s, ix in groups.items()}
-        exact: dict[str, dict[Any, list[int]]] = {}
-        plural: dict[str, dict[Any, list[int]]] = {}
-        for i, (s, k, sk) in enumerate(zip(scenes, keys, skeys)):
-            if k:
-                exact.setdefault(k, {}).setdefault(s, []).append(i)
-                plural.setdefault(sk, {}).setdefault(s, []).append(i)
-        #: label key -> scene -> node indices (and the same by singular key)
-        self._exact = {k: {s: np.asarray(v, dtype=np.intp) for s, v in d.items()} for k, d in exact.items()}
-        self._plural = {k: {s: np.asarray(v, dtype=np.intp) for s, v in d.items()} for k, d in plural.items()}
-        self._beliefs: dict[str, dict[int, float]] = {}
-        self._belief_preds: dict[str, list[str]] = {}
-        self._all_preds: list[str] | None = None
+                    self.fronts[i] = (fx, fy)
+        self._read_labels(ix.tolist())
+        fill_boxes(self.lo, self.hi, rows, boxes, True)
+        fill_boxes(self.lo, self.hi, crow, cents, False)
+        self.has_box[ix] = ~np.isnan(self.lo[ix]).any(axis=1)
+        return ix
+
+    def _scene_key_index(self, scene: Any, key: str, singular: bool) -> np.ndarray:
+        ix = self.load_scene(scene)
+        keys = self.skeys if singular else self.keys
+        return np.asarray([i for i in ix.tolist() if keys[i] == key], dtype=np.intp)
 
     @classmethod
     def from_graph(cls, graph: Any) -> NodeTable:
@@ -214,11 +250,11 @@ class NodeTable:
         P = 1, plus nodes whose matching ``is_<class>`` belief is committed (posterior mean
         strictly above ``commit_tau``), at that posterior mean."""
         key, skey = class_key(name), singular_key(name)
-        empty = np.zeros(0, dtype=np.intp)
-        ix = self._exact.get(key, {}).get(scene, empty)
+        self.load_scene(scene)
+        ix = self._scene_key_index(scene, key, False)
         tier = "exact"
-        if not len(ix):
-            ix = self._plural.get(skey, {}).get(scene, empty)
+        if not len(ix) and skey:
+            ix = self._scene_key_index(scene, skey, True)
             tier = "plural"
         p: dict[int, float] = dict.fromkeys(ix.tolist(), 1.0)
         if use_beliefs:
@@ -228,7 +264,7 @@ class NodeTable:
                     if i in p:
                         continue
                     if in_scene is None:
-                        in_scene = set(self.scene_nodes.get(scene, np.zeros(0, dtype=np.intp)).tolist())
+                        in_scene = set(self.scene_index(scene).tolist())
                     if i in in_scene and m > commit_tau:
                         p[i] = max(self._exclusive(i, pred, m), p.get(i, 0.0))
             if len(p) > len(ix):
@@ -240,10 +276,19 @@ class NodeTable:
 
     def scenes_with(self, names: list[str], *, use_beliefs: bool = True, commit_tau: float = 0.5) -> list[Any]:
         """Scenes in which every class name has at least one member, in order of first appearance."""
+        if self._key_scenes is None:
+            self._read_labels(list(range(len(self.nodes))))
+            exact: dict[str, set[Any]] = {}
+            plural: dict[str, set[Any]] = {}
+            for s, k, sk in zip(self.scenes, self.keys, self.skeys):
+                if k:
+                    exact.setdefault(k, set()).add(s)
+                    plural.setdefault(sk, set()).add(s)
+            self._key_scenes = (exact, plural)
         found: set[Any] | None = None
         for name in names:
             key, skey = class_key(name), singular_key(name)
-            mine = set(self._exact.get(key, {})) | set(self._plural.get(skey, {}))
+            mine = self._key_scenes[0].get(key, set()) | self._key_scenes[1].get(skey, set())
             if use_beliefs:
                 for pred in self.belief_predicates(name):
                     mine.update(self.scenes[i] for i, m in self._belief_means(pred).items() if m > commit_tau)

@@ -48,7 +48,7 @@ def refer(graph: Any, query: ReferringQuery | str, *, scene: Any = _MISSING, ind
     table = index if index is not None else NodeTable.from_graph(graph)
     classes = [q.target, *q.anchors]
     if scene is not _MISSING:
-        if scene not in table.scene_nodes:
+        if not table.has_scene(scene):
             shown = ", ".join(map(repr, list(table.scene_nodes)[:20]))
             raise ReferError(f"refer: scene {scene!r} holds no node of this graph; scenes: {shown}")
         scenes = [scene]
