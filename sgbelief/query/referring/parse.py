@@ -75,7 +75,7 @@ _ARTICLE = r"(?:the|a|an|this|these|that|those|some|one)"
 _VERB = (r"(?:please\s+)?(?:find|choose|select|pick\s+out|pick|locate|identify|show\s+me|show|point\s+to|"
          r"point\s+at|look\s+for|get|grab|where\s+is|where\s+are|which\s+is|what\s+is|it\s+is|this\s+is)")
 _LEAD = re.compile(rf"^(?:{_VERB}\s+)?(?:{_ARTICLE}\s+)?")
-_COPULA = re.compile(r"\s+(?:(?:that|which|who)\s+(?:is|are|'s)|that's|which's)\s+(?:(?:the|a)\s+(?=(?:closest|nearest|farthest|furthest)\b))?"
+_COPULA = re.compile(r"(?:^|\s+)(?:(?:that|which|who)\s+(?:is|are|'s)|that's|which's)\s+(?:(?:the|a)\s+(?=(?:closest|nearest|farthest|furthest)\b))?"
                      r"|\s+(?:that|which)\s+(?=(?:supports?|holds?)\b)")
 _WITH_ON_TOP = re.compile(
     rf"^(?P<target>.+?)\s+with\s+(?:{_ARTICLE}\s+)?(?P<anchor>.+?)\s+(?:on|at)\s+"
