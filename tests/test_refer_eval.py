@@ -69,3 +69,28 @@ def test_cli_refer_prints_the_answer_and_json(tmp_path: Path, rooms, refs, capsy
     assert main(["refer", str(tmp_path / "map"), "the chair"]) == 1
     err = capsys.readouterr().err
     assert "sgbelief refer: error: cannot read the utterance" in err and "'chair'" in err
+
+
+def test_docs_referring_example_runs(capsys) -> None:
+    """docs/queries.md's referring example runs as written and prints what it shows."""
+    import re
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "queries.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", doc, flags=re.S) if "refer(graph" in b)
+    exec(compile(block, "docs/queries.md", "exec"), {})
+    printed = capsys.readouterr().out.strip().splitlines()
+    shown = [line[2:] for line in block.splitlines() if line.startswith("# ")]
+    assert printed == shown
+
+
+def test_bench_refer_smoke() -> None:
+    """benchmarks/bench_refer.py at a tiny size: it answers every timed query (no timing asserted)."""
+    import subprocess
+    import sys
+
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_refer.py"
+    out = subprocess.run([sys.executable, str(script), "--nodes", "400", "--queries", "10", "--rooms", "2", "--json"],
+                         capture_output=True, text=True, check=True, timeout=600).stdout
+    res = json.loads(out.strip().splitlines()[-1])
+    assert res["nodes"] == 400 and res["queries"] == 10 and res["timed_queries_correct"] == 10
+    assert res["cold_ms_median"] > 0 and res["accuracy"]["all"]["n"] > 0
