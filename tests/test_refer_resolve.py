@@ -163,3 +163,26 @@ def test_certain_labels_reduce_to_the_geometric_answer(xy, anchor_xy, farthest) 
     assert ans.best == f"c{order[0]}"
     assert dict(ans.ranked)[ans.best] == 1.0
     assert sum(p for _, p in ans.ranked) == pytest.approx(1.0)
+
+
+def test_scene_choice_follows_the_utterance_presuppositions() -> None:
+    """Two scenes hold trash cans and doors; only s0 has one door and a clear nearest can."""
+    g = SceneGraph()
+    g.add_node("s1/door1", bbox=box(0, 0), label="doors", scene="s1")
+    g.add_node("s1/door2", bbox=box(5, 0), label="doors", scene="s1")
+    g.add_node("s1/can1", bbox=box(1, 0), label="trash can", scene="s1")
+    g.add_node("s1/can2", bbox=box(4, 0), label="trash can", scene="s1")
+    g.add_node("s0/door", bbox=box(0, 0), label="doors", scene="s0")
+    g.add_node("s0/can1", bbox=box(1, 0), label="trash can", scene="s0")
+    g.add_node("s0/can2", bbox=box(4, 0), label="trash can", scene="s0")
+    with pytest.warns(UserWarning):
+        assert refer(g, "the trash can closest to the doors").best == "s0/can1"
+
+
+def test_flat_and_array_boxes_are_read() -> None:
+    g = nx.Graph()
+    g.add_node("a", bbox=[0, 0, 0, 0.4, 0.4, 0.5], label="chair", scene="x")
+    g.add_node("b", bbox=np.array([[3, 0, 0], [3.4, 0.4, 0.5]]), label="chair", scene="x")
+    g.add_node("t", bbox=[[4, 0, 0], [5, 1, 0.7]], label="table", scene="x")
+    assert refer(g, "the chair closest to the table").best == "b"
+    assert refer(g, "the chair farthest from the table").best == "a"

@@ -160,6 +160,8 @@ class NodeTable:
             a = self._attrs[i]
             b = a.get("bbox")
             if b is not None:
+                if len(b) == 6:  # a flat (xmin, ymin, zmin, xmax, ymax, zmax)
+                    b = (tuple(b[:3]), tuple(b[3:]))
                 rows.append(i)
                 boxes.append(b)
             elif (c := a.get("centroid")) is not None:

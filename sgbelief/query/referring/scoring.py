@@ -54,6 +54,7 @@ class ReferConfig:
     between_z: float = 0.2            # between: z-overlap with each anchor over the target's height
     section_occupancy: float = 0.5    # left/right/front/back: centre of the soft step on occupancy
     near_distance: float = 1.0        # near / far: reported against this distance (explain)
+    superlative_gap: float = 0.2      # scene choice: Sr3D's margin of the nearest (farthest) over the runner-up
     width_ratio: float = 0.05         # soft-step widths: ratios
     width_metres: float = 0.03        # soft-step widths: metres
     width_occupancy: float = 0.12
@@ -138,6 +139,38 @@ def _anchor_sets(query: ReferringQuery, anchors: list[Membership], cap: int) -> 
     return sets[:cap]
 
 
+def _exactly_one(q: np.ndarray) -> float:
+    """P(exactly one of independent members with probabilities q)."""
+    q = np.clip(q, 0.0, 1.0 - 1e-12)
+    return float(np.prod(1.0 - q) * np.sum(q / (1.0 - q)))
+
+
+def _scene_evidence(rel: Relation, raw_total: float, priors: list[float], target: Membership,
+                    anchors: list[Membership], meas_h: list[dict[str, np.ndarray]], weights: list[float],
+                    cfg: ReferConfig) -> float:
+    """How well a scene explains the utterance, to choose among scenes that all hold its classes:
+    the mean over anchor hypotheses of P(well formed), times Sr3D's presuppositions -- a unique
+    anchor (all but the support and vertical relations), and for a superlative at least two members
+    of the target class and a clear winner (the runner-up ``gap`` metres behind)."""
+    if math.isnan(raw_total) or not priors:
+        return 0.0
+    ev = raw_total / max(sum(priors), 1e-12)
+    if rel.family in ("horizontal", "between", "allocentric"):
+        for m in anchors:
+            ev *= _exactly_one(m.p)
+    if rel.family == "horizontal" and weights:
+        if _exactly_one(target.p) + float(np.prod(1.0 - np.clip(target.p, 0.0, 1.0))) >= 1.0 - 1e-12:
+            ev *= 0.05  # at most one member: Sr3D asks closest / farthest only among several
+        d = meas_h[int(np.argmax(weights))].get("distance")
+        if d is not None:
+            ds = np.sort(d[target.p > 0.5])
+            if rel in (Relation.FARTHEST, Relation.FAR):
+                ds = ds[::-1]
+            if len(ds) >= 2:
+                ev *= float(soft_above(abs(ds[1] - ds[0]), cfg.superlative_gap, cfg.width_metres))
+    return ev
+
+
 def score_scene(table: NodeTable, scene: Any, query: ReferringQuery, target: Membership,
                 anchors: list[Membership], cfg: ReferConfig) -> tuple[ReferAnswer, float]:
     """The answer in one scene, and the evidence sum_{a,h} q_a prior(h) E(a,h) (how well the scene
@@ -198,5 +231,5 @@ def score_scene(table: NodeTable, scene: Any, query: ReferringQuery, target: Mem
         tiers = ", ".join(f"{name}: {m.tier}" for name, m in zip((query.target, *query.anchors), (target, *anchors)))
         notes.append(f"class match tiers ({tiers})")
     ranked = tuple((c.node, c.probability) for c in candidates)
-    evidence = raw_total if not math.isnan(raw_total) else 0.0
+    evidence = _scene_evidence(rel, raw_total, [h[2] for h in hyps], target, anchors, meas_h, weights, cfg)
     return ReferAnswer(query, scene, ranked, tuple(candidates), tuple(anchor_choices), tuple(notes)), evidence
