@@ -12,7 +12,6 @@ axis-aligned boxes.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -338,7 +337,3 @@ def scannet_layout_graph(rooms: Sequence[Room], folder: str | Path) -> tuple[Any
                 ids[o.id] = by_object[i]
     return g, ids
 
-
-def rotate_front(front: tuple[float, float], degrees: float) -> tuple[float, float]:
-    a = math.radians(degrees)
-    return (front[0] * math.cos(a) - front[1] * math.sin(a), front[0] * math.sin(a) + front[1] * math.cos(a))

@@ -9,7 +9,6 @@ versions the scorer uses are :func:`soft_above` (a logistic step) of these numbe
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -175,11 +174,3 @@ def between_measures(lo: np.ndarray, hi: np.ndarray, lo_a: np.ndarray, hi_a: np.
         "z_b": z_overlap(lo, hi, lo_b, hi_b) / height,
     }
 
-
-def unit(v: Sequence[float]) -> tuple[float, float]:
-    """A horizontal unit vector (raises on a zero vector)."""
-    x, y = float(v[0]), float(v[1])
-    n = math.hypot(x, y)
-    if n == 0.0:
-        raise ValueError("zero direction vector")
-    return (x / n, y / n)
