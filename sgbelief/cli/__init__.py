@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("sgbelief.cli.replay", "replay an evidence log through several fusion operators"),
     "bench": ("sgbelief.cli.bench", "run the simulated suites and reproduce the paper's tables"),
     "query": ("sgbelief.cli.query", "ask a compound query of a saved scene graph"),
+    "refer": ("sgbelief.cli.refer", "the one object a referring utterance names (\"the chair closest to the door\")"),
     "retrieval": ("sgbelief.cli.retrieval", "compound-query retrieval F1 per operator"),
     "import-cg": ("sgbelief.cli.import_cg", "import a saved ConceptGraphs map and replay its detections"),
     "inspect": ("sgbelief.cli.inspect", "show a saved graph's beliefs and provenance"),
