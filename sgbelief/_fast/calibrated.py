@@ -22,7 +22,7 @@ from sgbelief.fusion import queues
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import Verdict
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
-from sgbelief.fusion.rules import kl_upper_bound, revision_kl_exceeds
+from sgbelief.fusion.rules import adjudication, consensus_cell, kl_upper_bound, revision_kl_exceeds, standing
 from sgbelief.graph.provenance import EntryStatus, EntryVerdict
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -99,6 +99,8 @@ def apply_fused(
     claims_get = claims.get
     min_refit, refit_growth = cfg.calibration.min_refit, cfg.calibration.refit_growth
     calibrator = op.calibrator_
+    consensus_classes = op.consensus_classes
+    exclusive_with = op.vocabulary.exclusive_with if consensus_classes else None  # type: ignore[union-attr]
     tick = op.tick
     out: list[QueueResolution] = []
     n_events = n_targets = n_below = n_committed = n_quarantined = n_refused = 0
@@ -115,6 +117,11 @@ def apply_fused(
                     if node not in gnx:
                         raise UnknownNodeError(node, eid)
             resolutions = tick(graph, t) if t > graph.clock else []
+            cons = op._consensus_of(prov) if pred in consensus_classes else None
+            if cons is not None:
+                if cons.due():
+                    cons.refit()
+                rivals = exclusive_with(pred)  # type: ignore[misc]
             outcome_of = tables.get(pred) if tables is not None else None
             label_of = None
             if channel is not None and outcome_of is not None:
@@ -166,6 +173,15 @@ def apply_fused(
                     continue
                 if n_strata > 1:
                     claims[key] = n_prev + 1
+                if cons is not None:  # the consensus' calibration for a claim the channel cannot adjudicate
+                    if label is not None:
+                        cons.add_label(node, t, label)
+                    n_same, n_others, max_other = cons.standing_counts(node, pred, rivals)
+                    cell = consensus_cell(ctx, stratum, adjudication(label, y), standing(n_same, n_others, max_other))
+                    found = cons.likelihood_ratio(c, cell, pred) if y is None else None
+                    cons.add_claim(node, pred, ctx, c, cell, y is not None, eid)
+                    if found is not None:
+                        lam, kappa = found
                 claim_pos = (lam > 1.0) if (cal_sign and lam != 1.0) else raw_pos
                 if y is None:
                     verdict, code = _NO_CLAIM, _E_NO_CLAIM

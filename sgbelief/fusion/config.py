@@ -136,13 +136,14 @@ class OperatorConfig(_Frozen):
 PAPER_SETTINGS: dict[str, Any] = {
     "geometric_evidence": "none",
     "verdict_sign": "raw",
-    "calibration": {"lr_reference": "slice", "kappa_pooling": "slice", "support_strata": 1},
+    "calibration": {"lr_reference": "slice", "kappa_pooling": "slice", "support_strata": 1,
+                    "consensus": {"method": "none"}},
 }
 
 
 def paper_variant(config: OperatorConfig) -> OperatorConfig:
     """``config`` with the method options of :data:`PAPER_SETTINGS` (everything else unchanged)."""
-    cal = config.calibration.model_copy(update=PAPER_SETTINGS["calibration"])
+    cal = CalibrationConfig.model_validate({**config.calibration.model_dump(), **PAPER_SETTINGS["calibration"]})
     top = {k: v for k, v in PAPER_SETTINGS.items() if k != "calibration"}
     return config.model_copy(update={**top, "calibration": cal})
 

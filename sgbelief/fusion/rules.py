@@ -9,6 +9,9 @@ step                        function
 sign of the claim           :func:`claim_asserts`
 verdict (compat)            :func:`verdict`
 support stratum             :func:`support_stratum`
+adjudication status         :func:`adjudication`
+standing among classes      :func:`standing`
+consensus cell              :func:`consensus_cell`
 calibrated LR (Eq. 2)       :func:`calibrated_log_lr` (of :mod:`sgbelief.calibration.isotonic`)
 weight w = w0 kappa T(v)    :func:`evidence_weight`
 increments (Eq. 3)          :func:`claim_increments`
@@ -36,6 +39,9 @@ __all__ = [
     "verdict",
     "support_stratum",
     "stratified_context",
+    "adjudication",
+    "standing",
+    "consensus_cell",
     "calibrated_log_lr",
     "evidence_weight",
     "claim_increments",
@@ -109,6 +115,41 @@ def stratified_context(context: str, stratum: int, n_strata: int) -> str:
     """The calibration context key of a claim: ``context`` itself when there is one stratum, else
     ``"<context>|s<stratum>"`` (the Mondrian cell (context, stratum) for each predicate)."""
     return context if n_strata <= 1 else f"{context}|s{stratum}"
+
+
+def adjudication(label: str | None, outcome: int | None) -> str:
+    """Whether the geometric channel could judge a claim at (v, t): ``"decisive"`` (its label gives
+    an outcome y for phi), ``"ambiguous"`` (it labels v, but the label is in neither of phi's sets:
+    ``otherprop``, ``shelves`` for a bookshelf) or ``"unseen"`` (no label at (v, t), or no channel).
+
+    Claims of the three kinds are not exchangeable: the elements a channel labels decisively are
+    the well-observed ones, and claims on clutter nobody can judge are right less often. Each kind
+    is therefore calibrated in a cell of its own (docs/method.md §8).
+    """
+    if outcome is not None:
+        return "decisive"
+    return "unseen" if label is None else "ambiguous"
+
+
+def standing(n_same: int, n_others: int, max_other: int) -> str:
+    """A claim's standing among the exclusive classes already claimed at its element.
+
+    ``n_same``: earlier claims of phi at v; ``n_others``: earlier claims at v of predicates that
+    exclude phi; ``max_other``: the most claims any one of them received. ``"alone"`` (no rival
+    class claimed), ``"leading"`` (phi has at least as many claims as any rival) or ``"trailing"``.
+    An element claimed once as toilet, twice as bed and once as tv is probably none of them: its
+    claims fall in the leading and trailing cells, which are calibrated on what such elements turn
+    out to be.
+    """
+    if n_others == 0:
+        return "alone"
+    return "leading" if n_same >= max_other else "trailing"
+
+
+def consensus_cell(context: str, stratum: int, status: str, rank: str) -> str:
+    """The calibration cell of a claim the channel cannot adjudicate: (context, support stratum,
+    adjudication status, standing), as the key ``"<context>|s<stratum>|<status>|<standing>"``."""
+    return f"{context}|s{stratum}|{status}|{rank}"
 
 
 def evidence_weight(w0: float, kappa: float, mass: float) -> float:

@@ -1,0 +1,179 @@
+"""The map-wide consensus behind the calibration of claims the geometric channel cannot adjudicate.
+
+A :class:`MapConsensus` belongs to one map (one provenance store) and holds
+
+* the claim table: every claim of an exclusive class the operator applied (element, predicate,
+  context, confidence, its calibration cell, whether the channel adjudicated it, event id);
+* the labels the geometric channel gave, once per (element, time);
+* per element, the claims each exclusive class received so far (a claim's standing,
+  :func:`~sgbelief.fusion.rules.standing`).
+
+Every so often (at least ``every`` new claims and ``growth`` times the claims held, so O(log n)
+refits over a stream) it refits, in one batch over the whole table:
+
+1. a Dawid–Skene model (:class:`~sgbelief.calibration.dawid_skene.DawidSkene`): the latent class
+   of each element among the exclusive classes plus "none of these", a confusion per worker,
+   where a worker is a claim's context and its confidence bin (by rank within the context, so the
+   model is invariant under a monotone transform of the confidences) or the geometric channel, whose
+   every label (``otherprop`` included) is an observation with a learned confusion;
+2. the consensus outcome of each silent claim, q_v(phi), and from those the per-cell isotonic
+   calibration (:class:`~sgbelief.calibration.consensus.ConsensusCalibration`).
+
+The operator asks :meth:`MapConsensus.likelihood_ratio` for a silent claim's (Lambda_hat,
+kappa_hat); until the first refit it answers None and the operator uses §4.1's calibrator as before.
+Per-event work is O(1): appending a row and two dictionary updates.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable
+from typing import Any
+
+import numpy as np
+
+from sgbelief.calibration.config import CalibrationConfig
+from sgbelief.calibration.consensus import ConsensusCalibration
+from sgbelief.calibration.dawid_skene import DawidSkene
+
+__all__ = ["MapConsensus", "GEOMETRIC_WORKER"]
+
+#: the Dawid–Skene worker name of the geometric channel
+GEOMETRIC_WORKER = "<geometric>"
+
+
+class MapConsensus:
+    """Claim table, channel labels and the consensus calibration of one map (see the module docstring)."""
+
+    def __init__(self, config: CalibrationConfig, exclusive: frozenset[str]) -> None:
+        cc = config.consensus
+        self.every, self.growth, self.bins = cc.every, cc.growth, cc.bins
+        self.exclusive = exclusive
+        self._ds = DawidSkene(n_iter=cc.n_iter, smoothing=cc.smoothing, none_class=True)
+        self.calibration = ConsensusCalibration(config.target_size, config.kappa_min, config.lr_max, config.cold_start)
+        # the claim table, as parallel lists (appended per claim)
+        self.node: list[Any] = []
+        self.pred: list[str] = []
+        self.ctx: list[str] = []
+        self.conf: list[float] = []
+        self.cell: list[Hashable] = []
+        self.decisive: list[bool] = []
+        self.event: list[str] = []
+        #: the channel's labels: (element, label) per (element, time) seen
+        self.labels: dict[tuple[Any, int], str] = {}
+        #: element -> {exclusive predicate: claims so far}
+        self.counts: dict[Any, dict[str, int]] = {}
+        self.n_at_fit = 0
+        self.n_fits = 0
+
+    # ------------------------------------------------------------------ per claim
+    def standing_counts(self, node: Any, predicate: str, rivals: frozenset[str]) -> tuple[int, int, int]:
+        """(claims of ``predicate`` at ``node``, claims of its rivals there, the most any rival has)."""
+        held = self.counts.get(node)
+        if not held:
+            return 0, 0, 0
+        n_others = max_other = 0
+        for p, n in held.items():
+            if p in rivals:
+                n_others += n
+                if n > max_other:
+                    max_other = n
+        return held.get(predicate, 0), n_others, max_other
+
+    def add_claim(self, node: Any, predicate: str, context: str, confidence: float, cell: Hashable,
+                  decisive: bool, event_id: str) -> None:
+        """Append one applied claim of an exclusive class."""
+        self.node.append(node)
+        self.pred.append(predicate)
+        self.ctx.append(context)
+        self.conf.append(confidence)
+        self.cell.append(cell)
+        self.decisive.append(decisive)
+        self.event.append(event_id)
+        held = self.counts.get(node)
+        if held is None:
+            held = self.counts[node] = {}
+        held[predicate] = held.get(predicate, 0) + 1
+
+    def add_label(self, node: Any, t: int, label: str) -> None:
+        """The channel labelled ``node`` ``label`` at time ``t`` (kept once per (node, t))."""
+        self.labels[(node, t)] = label
+
+    def drop_events(self, event_ids: set[str]) -> None:
+        """Forget the claims of retracted events (the next refit no longer sees them)."""
+        keep = [i for i, e in enumerate(self.event) if e not in event_ids]
+        if len(keep) == len(self.event):
+            return
+        for name in ("node", "pred", "ctx", "conf", "cell", "decisive", "event"):
+            col = getattr(self, name)
+            setattr(self, name, [col[i] for i in keep])
+        self.counts = {}
+        for node, pred in zip(self.node, self.pred):
+            held = self.counts.setdefault(node, {})
+            held[pred] = held.get(pred, 0) + 1
+
+    # ------------------------------------------------------------------ batches
+    def due(self) -> bool:
+        """Whether enough claims arrived since the last refit: max(every, growth * held) new ones."""
+        n = len(self.node)
+        return n - self.n_at_fit >= max(self.every, self.growth * self.n_at_fit)
+
+    def likelihood_ratio(self, confidence: float, cell: Hashable, predicate: str) -> tuple[float, float] | None:
+        """(Lambda_hat, kappa_hat) of a silent claim from the consensus calibration, or None before the first refit."""
+        if not self.calibration.fitted:
+            return None
+        return self.calibration.likelihood_ratio(confidence, cell, predicate)
+
+    def refit(self) -> None:
+        """Refit the Dawid–Skene model and the per-cell calibration on the whole table."""
+        n = len(self.node)
+        self.n_at_fit = n
+        self.n_fits += 1
+        if n == 0:
+            return
+        probas, class_of, task_of = self.fit_consensus()
+        silent = [i for i in range(n) if not self.decisive[i]]
+        if not silent:
+            return
+        q = np.array([probas[task_of[self.node[i]], class_of[self.pred[i]]] for i in silent])
+        c = np.array([self.conf[i] for i in silent])
+        self.calibration.fit([self.cell[i] for i in silent], [self.pred[i] for i in silent], c, q)
+
+    def fit_consensus(self) -> tuple[np.ndarray, dict[str, int], dict[Any, int]]:
+        """The Dawid–Skene posterior over classes (+ none) per element: (probas, class index, task index)."""
+        task_of: dict[Any, int] = {}
+        for node in self.node:
+            if node not in task_of:
+                task_of[node] = len(task_of)
+        classes = sorted(set(self.pred))
+        tasks = [task_of[v] for v in self.node]
+        workers = [f"{ctx}|b{b}" for ctx, b in zip(self.ctx, self._bins())]
+        labels = list(self.pred)
+        votes = list(self.conf)
+        for (node, _t), label in self.labels.items():
+            task = task_of.get(node)
+            if task is None:  # labelled, never claimed: says nothing about a claim
+                continue
+            tasks.append(task)
+            workers.append(GEOMETRIC_WORKER)
+            labels.append("geo:" + label)
+            votes.append(0.0)
+        ds = self._ds.fit(tasks, workers, labels, classes=classes, n_tasks=len(task_of), votes=votes)
+        self.ds_ = ds
+        return ds.probas_, {p: i for i, p in enumerate(classes)}, task_of  # type: ignore[return-value]
+
+    def _bins(self) -> list[int]:
+        """Each claim's confidence bin: its rank quantile within its context (``bins`` equal-count bins)."""
+        out = [0] * len(self.conf)
+        if self.bins <= 1:
+            return out
+        by_ctx: dict[str, list[int]] = {}
+        for i, ctx in enumerate(self.ctx):
+            by_ctx.setdefault(ctx, []).append(i)
+        for idx in by_ctx.values():
+            c = np.array([self.conf[i] for i in idx])
+            # rank (ties share the lowest rank), so a monotone transform of c bins identically
+            ranks = np.searchsorted(np.sort(c), c, side="left")
+            b = np.minimum(ranks * self.bins // len(idx), self.bins - 1)
+            for i, bi in zip(idx, b.tolist()):
+                out[i] = bi
+        return out
