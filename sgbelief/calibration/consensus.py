@@ -31,7 +31,7 @@ import math
 from collections.abc import Hashable, Sequence
 
 import numpy as np
-from sklearn.isotonic import isotonic_regression
+from scipy.optimize import isotonic_regression
 
 from sgbelief.calibration.isotonic import calibrated_log_lr, interpolate, probability_clip
 from sgbelief.calibration.mondrian import cold_start_log_lr
@@ -45,7 +45,8 @@ def fit_cell(c: np.ndarray, q: np.ndarray, w: np.ndarray | None = None) -> tuple
     """Isotonic regression of the soft outcomes ``q`` on the confidences ``c`` (weights ``w``), as knots.
 
     The weighted least-squares isotonic fit of targets in [0, 1] is the maximum-likelihood
-    non-decreasing p(c) for Bernoulli outcomes with those expectations. Equal confidences are pooled
+    non-decreasing p(c) for Bernoulli outcomes with those expectations (scipy's public
+    pool-adjacent-violators, ``scipy.optimize.isotonic_regression``). Equal confidences are pooled
     first (their weighted mean target), so the knots are strictly increasing in c.
     """
     order = np.argsort(c, kind="stable")
@@ -54,7 +55,7 @@ def fit_cell(c: np.ndarray, q: np.ndarray, w: np.ndarray | None = None) -> tuple
     x, start = np.unique(cs, return_index=True)
     wsum = np.add.reduceat(ws, start)
     ymean = np.add.reduceat(ws * qs, start) / wsum
-    fitted = isotonic_regression(ymean, sample_weight=wsum, y_min=0.0, y_max=1.0, increasing=True)
+    fitted = isotonic_regression(ymean, weights=wsum, increasing=True).x  # targets in [0, 1]: so is the fit
     return x.tolist(), fitted.tolist()
 
 

@@ -14,8 +14,10 @@ refits over a stream) it refits, in one batch over the whole table:
 1. a Dawid–Skene model (:class:`~sgbelief.calibration.dawid_skene.DawidSkene`): the latent class
    of each element among the exclusive classes plus "none of these", a confusion per worker,
    where a worker is a claim's context and its confidence bin (by rank within the context, so the
-   model is invariant under a monotone transform of the confidences) or the geometric channel, whose
-   every label (``otherprop`` included) is an observation with a learned confusion;
+   model is invariant under a monotone transform of the confidences), the element's support (how
+   many claims it received, bucketed: stray detections on clutter are rarely repeated) or the
+   geometric channel, whose every label (``otherprop`` included) is an observation with a learned
+   confusion;
 2. the consensus outcome of each silent claim, q_v(phi), and from those the per-cell isotonic
    calibration (:class:`~sgbelief.calibration.consensus.ConsensusCalibration`).
 
@@ -35,10 +37,23 @@ from sgbelief.calibration.config import CalibrationConfig
 from sgbelief.calibration.consensus import ConsensusCalibration
 from sgbelief.calibration.dawid_skene import DawidSkene
 
-__all__ = ["MapConsensus", "GEOMETRIC_WORKER"]
+__all__ = ["MapConsensus", "GEOMETRIC_WORKER", "SUPPORT_WORKER", "support_bucket"]
 
 #: the Dawid–Skene worker name of the geometric channel
 GEOMETRIC_WORKER = "<geometric>"
+#: the Dawid–Skene worker whose label is how many claims an element received (its support)
+SUPPORT_WORKER = "<support>"
+#: support buckets: 1, 2, 3, 4-5, 6-9, 10+ claims
+_SUPPORT_EDGES = (1, 2, 3, 4, 6, 10)
+
+
+def support_bucket(n: int) -> int:
+    """The support observation of an element with ``n`` claims: the index of its bucket 1, 2, 3, 4-5, 6-9, 10+."""
+    b = 0
+    for i, edge in enumerate(_SUPPORT_EDGES):
+        if n >= edge:
+            b = i
+    return b
 
 
 class MapConsensus:
@@ -149,6 +164,14 @@ class MapConsensus:
         workers = [f"{ctx}|b{b}" for ctx, b in zip(self.ctx, self._bins())]
         labels = list(self.pred)
         votes = list(self.conf)
+        # the support of each element is an observation: clutter receives few claims, and without
+        # it "none of these" is not identifiable (one label is always best explained by its class)
+        n_claims = np.bincount(np.asarray(tasks, dtype=np.intp), minlength=len(task_of))
+        for task, n in enumerate(n_claims.tolist()):
+            tasks.append(task)
+            workers.append(SUPPORT_WORKER)
+            labels.append(f"n{support_bucket(n)}")
+            votes.append(0.0)
         for (node, _t), label in self.labels.items():
             task = task_of.get(node)
             if task is None:  # labelled, never claimed: says nothing about a claim
