@@ -132,6 +132,17 @@ class RealisticConfig(_M):
             raise ValueError("frames_per_scene must be a range 1 <= lo <= hi")
         return self
 
+    def expected_label_shares(self) -> dict[str | None, float]:
+        """NYU40 label (None: unannotated) -> expected share of a seed's objects (the mixture of the
+        room types' Poisson means)."""
+        p = {k: v.probability / sum(r.probability for r in self.room_types.values())
+             for k, v in self.room_types.items()}
+        mass: dict[str | None, float] = {}
+        for spec in self.objects.values():
+            mass[spec.label] = mass.get(spec.label, 0.0) + sum(p[r] * m for r, m in spec.rooms.items())
+        total = sum(mass.values())
+        return {k: v / total for k, v in sorted(mass.items(), key=lambda kv: -kv[1])}
+
     def labels(self) -> set[str]:
         """Every NYU40 label a layout object or a segmenter output can carry."""
         out = {s.label for s in self.objects.values() if s.label is not None}
