@@ -212,7 +212,8 @@ def test_score_cell_false_commit_breakdown() -> None:
         # every false commit is counted once, under one status; they are the per-class false positives
         assert fc["total"] == fc["adjudicable"] + fc["ambiguous"] + fc["unseen"]
         assert fc["total"] == sum(s["fp"] for s in row["per_predicate"].values())
-        assert fc["total"] == sum(fc["by_label"].values())
+        assert fc["total"] == sum(fc["by_label"].values()) == sum(fc["object_label"].values())
+        assert fc["object_label"]["unannotated"] == fc["by_label"].get("None", 0)
     none = score_cell(realistic_cell(1, "rfcn", "none", "c", config=load_realistic_config(scale=0.25)), ["majority"])
     assert none[0]["false_commits"]["unseen"] == none[0]["false_commits"]["total"]
 

@@ -8,6 +8,10 @@ is 0. It sits where the channel
 - **ambiguous**: the channel labelled the node in some claim, but no label decided the predicate
   (otherprop, otherfurniture, otherstructure, shelves, books, box, ...);
 - **unseen**: the channel gave no label in any of those claims (or there is no channel).
+
+A second breakdown looks at the node's own NYU40 label, whatever the channel reported: it
+**decides** the predicate, is **silent** on it (otherprop, otherfurniture, ...), or the node is
+**unannotated**.
 """
 
 from __future__ import annotations
@@ -24,10 +28,11 @@ from sgbelief.eval.realistic_config import RealisticConfig, load_realistic_confi
 from sgbelief.eval.replay import make_runs, replay, score_run
 from sgbelief.fusion.config import OperatorConfig
 
-__all__ = ["STATUSES", "evidence_status", "score_cell", "run_realistic", "summarize_realistic",
+__all__ = ["STATUSES", "OBJECT_LABELS", "evidence_status", "score_cell", "run_realistic", "summarize_realistic",
            "render_realistic", "realistic_grid_rows"]
 
 STATUSES = ("adjudicable", "ambiguous", "unseen")
+OBJECT_LABELS = ("decides", "silent", "unannotated")
 
 
 def evidence_status(cell: RealisticCell) -> dict[tuple[str, str], str]:
@@ -59,21 +64,26 @@ def score_cell(cell: RealisticCell, operators: Sequence[str], config: OperatorCo
         where: Counter[str] = Counter()
         labels: Counter[str] = Counter()
         per_pred: Counter[str] = Counter()
+        own: Counter[str] = Counter()
         prov = run.graph.provenance
         for node, pred in prov.pairs():
             if pred not in cell.predicates or cell.truth.get(node, {}).get(pred, 0) == 1:
                 continue
             if prov.mean(node, pred) > config.tau:
                 where[status.get((node, pred), "unseen")] += 1
-                labels[str(cell.labels.get(node))] += 1
+                lab = cell.labels.get(node)
+                labels[str(lab)] += 1
                 per_pred[pred] += 1
+                own["unannotated" if lab is None else "silent" if cell.table.outcome(pred, lab) is None
+                    else "decides"] += 1
         rows.append({
             "suite": "realistic", "seed": cell.seed, "profile": cell.transform, "source": cell.detector,
             "channel": cell.channel, "operator": run.name, "mean_iou": sc.mean_iou, "brier": sc.brier,
             "per_predicate": {p: {"iou": s.iou, "precision": s.precision, "recall": s.recall, "tp": s.tp, "fp": s.fp,
                                   "fn": s.fn} for p, s in sc.per_predicate.items()},
             "false_commits": {"total": sum(where.values()), **{k: where.get(k, 0) for k in STATUSES},
-                              "by_label": dict(labels.most_common()), "by_predicate": dict(per_pred)},
+                              "by_label": dict(labels.most_common()), "by_predicate": dict(per_pred),
+                              "object_label": {k: own.get(k, 0) for k in OBJECT_LABELS}},
             "events": len(cell.events),
         })
     return rows
@@ -131,6 +141,7 @@ def summarize_realistic(rows: Sequence[dict[str, Any]]) -> dict[tuple[str, str, 
                 fp = sum(r["per_predicate"][p]["fp"] for r in rs)
                 prec[p] = tp / (tp + fp) if tp + fp else math.nan
             fc = {k: sum(r["false_commits"][k] for r in rs) for k in ("total", *STATUSES)}
+            fc.update({k: sum(r["false_commits"]["object_label"][k] for r in rs) for k in OBJECT_LABELS})
             labels: Counter[str] = Counter()
             for r in rs:
                 labels.update(r["false_commits"]["by_label"])
@@ -148,7 +159,8 @@ def render_realistic(summary: dict[tuple[str, str, str], dict[str, dict[str, Any
     """Markdown: one table per (detector, channel, transform)."""
     lines = [f"Realistic suite, seeds {', '.join(map(str, seeds))}: mean IoU over the eight classes (mean over "
              "seeds), commit precision per class (pooled over seeds; – = nothing committed), and the false "
-             "commits (summed over seeds) by where the channel stood: adjudicable / ambiguous / unseen.", ""]
+             "commits (summed over seeds) by where the channel stood on their claims (adjudicable / ambiguous / "
+             "unseen) and by the node's own label (decides the predicate / silent on it / unannotated).", ""]
     for (det, ch, tr), ops in summary.items():
         first = next(iter(ops.values()))
         preds = list(first["precision"])
@@ -156,14 +168,16 @@ def render_realistic(summary: dict[tuple[str, str, str], dict[str, dict[str, Any
                  for p in preds]
         lines += [f"### {det} / channel {ch} / confidence {tr} ({first['events']:.0f} events per seed)", "",
                   "| operator | mean IoU | " + " | ".join(f"P {s}" for s in short)
-                  + " | false commits | adjudicable | ambiguous | unseen | top labels of false commits |",
-                  "|---|---|" + "---|" * len(short) + "---|---|---|---|---|"]
+                  + " | false commits | adjudicable / ambiguous / unseen | label decides / silent / none "
+                  "| top labels of false commits |",
+                  "|---|---|" + "---|" * len(short) + "---|---|---|---|"]
         best = max(ops, key=lambda o: ops[o]["mean_iou"])
         for op, s in ops.items():
             fc = s["false_commits"]
             top = ", ".join(f"{k} {v}" for k, v in s["false_commit_labels"].items())
             name = f"**{op}**" if op == best else op
             lines.append(f"| {name} | {_f(s['mean_iou'])} | " + " | ".join(_f(s["precision"][p], 2) for p in preds)
-                         + f" | {fc['total']} | {fc['adjudicable']} | {fc['ambiguous']} | {fc['unseen']} | {top} |")
+                         + f" | {fc['total']} | {fc['adjudicable']} / {fc['ambiguous']} / {fc['unseen']} | "
+                         f"{fc['decides']} / {fc['silent']} / {fc['unannotated']} | {top} |")
         lines.append("")
     return "\n".join(lines)
