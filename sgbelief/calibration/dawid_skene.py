@@ -90,13 +90,17 @@ class DawidSkene:
         n_tasks: int | None = None,
         weights: Sequence[float] | NDArray[np.float64] | None = None,
         votes: Sequence[float] | NDArray[np.float64] | None = None,
+        vote_classes: Sequence[str | None] | None = None,
+        none_votes: Sequence[float] | NDArray[np.float64] | None = None,
     ) -> DawidSkene:
         """Fit on a long table of observations (task index, worker, label).
 
         ``classes``: the latent classes (labels equal to a class name vote for it at
         initialisation); ``n_tasks``: number of tasks (default: max index + 1); ``weights``: each
-        observation's weight in both steps (default 1); ``votes``: each observation's weight in the
-        initial vote only (default: ``weights``; a claim's confidence, say).
+        observation's weight in both steps (default 1). The initial posterior is a vote: each
+        observation gives ``votes`` (default: ``weights``) to the class ``vote_classes`` names
+        (default: its label, when that is a class; None: no vote) and ``none_votes`` (default 0)
+        to "none of these", which also starts with ``none_prior_votes`` on every task.
         """
         t = np.asarray(tasks, dtype=np.intp)
         n_obs = t.shape[0]
@@ -110,14 +114,19 @@ class DawidSkene:
         self.classes_, self.labels_, self.workers_ = cls, list(label_names), list(worker_names)
         n_w, n_l = len(worker_names), len(label_names)
         # initial posterior: a weighted vote, "none" with its prior votes
-        class_of_label = {name: j for j, name in enumerate(cls)}
-        lab_class = np.array([class_of_label.get(name, -1) for name in label_names], dtype=np.intp)
-        oc = lab_class[li]
+        class_of = {name: j for j, name in enumerate(cls)}
+        if vote_classes is None:
+            lab_class = np.array([class_of.get(name, -1) for name in label_names], dtype=np.intp)
+            oc = lab_class[li]
+        else:
+            oc = np.array([-1 if name is None else class_of.get(name, -1) for name in vote_classes], dtype=np.intp)
         q = np.zeros((n_t, k))
         m = oc >= 0
         np.add.at(q, (t[m], oc[m]), v0[m])
         if self.none_class:
             q[:, k - 1] += self.none_prior_votes
+            if none_votes is not None:
+                np.add.at(q[:, k - 1], t, np.asarray(none_votes, dtype=np.float64))
         empty = q.sum(axis=1) <= 0
         q[empty] = 1.0
         q /= q.sum(axis=1, keepdims=True)

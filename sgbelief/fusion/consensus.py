@@ -161,9 +161,14 @@ class MapConsensus:
                 task_of[node] = len(task_of)
         classes = sorted(set(self.pred))
         tasks = [task_of[v] for v in self.node]
-        workers = [f"{ctx}|b{b}" for ctx, b in zip(self.ctx, self._bins())]
-        labels = list(self.pred)
-        votes = list(self.conf)
+        # a claim is an observation (class, confidence bin) of its context: clutter draws weak claims
+        bins, ranks = self._bins()
+        workers = list(self.ctx)
+        labels = [f"{p}|b{b}" for p, b in zip(self.pred, bins)]
+        # initial vote: a claim votes for its class by its confidence rank and for "none" by the rest
+        votes = list(ranks)
+        none_votes = [1.0 - r for r in ranks]
+        vote_classes: list[str | None] = list(self.pred)
         # the support of each element is an observation: clutter receives few claims, and without
         # it "none of these" is not identifiable (one label is always best explained by its class)
         n_claims = np.bincount(np.asarray(tasks, dtype=np.intp), minlength=len(task_of))
@@ -172,6 +177,8 @@ class MapConsensus:
             workers.append(SUPPORT_WORKER)
             labels.append(f"n{support_bucket(n)}")
             votes.append(0.0)
+            none_votes.append(0.0)
+            vote_classes.append(None)
         for (node, _t), label in self.labels.items():
             task = task_of.get(node)
             if task is None:  # labelled, never claimed: says nothing about a claim
@@ -180,23 +187,28 @@ class MapConsensus:
             workers.append(GEOMETRIC_WORKER)
             labels.append("geo:" + label)
             votes.append(0.0)
-        ds = self._ds.fit(tasks, workers, labels, classes=classes, n_tasks=len(task_of), votes=votes)
+            none_votes.append(0.0)
+            vote_classes.append(None)
+        ds = self._ds.fit(tasks, workers, labels, classes=classes, n_tasks=len(task_of), votes=votes,
+                          vote_classes=vote_classes, none_votes=none_votes)
         self.ds_ = ds
         return ds.probas_, {p: i for i, p in enumerate(classes)}, task_of  # type: ignore[return-value]
 
-    def _bins(self) -> list[int]:
-        """Each claim's confidence bin: its rank quantile within its context (``bins`` equal-count bins)."""
-        out = [0] * len(self.conf)
-        if self.bins <= 1:
-            return out
+    def _bins(self) -> tuple[list[int], list[float]]:
+        """Each claim's confidence bin and rank quantile within its context: ``bins`` equal-count
+        bins of the rank, and (rank + 1) / n in (0, 1]. Ranks (ties share the lowest) make both
+        invariant under a strictly increasing transform of the confidences."""
+        bins = [0] * len(self.conf)
+        quant = [1.0] * len(self.conf)
         by_ctx: dict[str, list[int]] = {}
         for i, ctx in enumerate(self.ctx):
             by_ctx.setdefault(ctx, []).append(i)
         for idx in by_ctx.values():
             c = np.array([self.conf[i] for i in idx])
-            # rank (ties share the lowest rank), so a monotone transform of c bins identically
             ranks = np.searchsorted(np.sort(c), c, side="left")
             b = np.minimum(ranks * self.bins // len(idx), self.bins - 1)
-            for i, bi in zip(idx, b.tolist()):
-                out[i] = bi
-        return out
+            qt = (ranks + 1) / len(idx)
+            for i, bi, qi in zip(idx, b.tolist(), qt.tolist()):
+                bins[i] = bi
+                quant[i] = qi
+        return bins, quant
