@@ -42,6 +42,7 @@ _A_REFUSED = Action.REFUSED
 # the verdict codes entries record (rules.ENTRY_VERDICT, without hashing an Enum per target)
 _E_NO_CLAIM, _E_CORR = EntryVerdict.NO_CLAIM, EntryVerdict.CORROBORATES
 _E_CONTRA, _E_GEO = EntryVerdict.CONTRADICTS, EntryVerdict.GEOMETRIC
+_E_EXCL = EntryVerdict.EXCLUSION
 
 
 class FusedCalibratedEngine:
@@ -100,6 +101,7 @@ def apply_fused(
     min_refit, refit_growth = cfg.calibration.min_refit, cfg.calibration.refit_growth
     calibrator = op.calibrator_
     consensus_classes = op.consensus_classes
+    rivals_of = op.vocabulary.exclusive_with if op.excludes_rivals else None  # type: ignore[union-attr]
     exclusive_with = op.vocabulary.exclusive_with if consensus_classes else None  # type: ignore[union-attr]
     tick = op.tick
     out: list[QueueResolution] = []
@@ -255,6 +257,14 @@ def apply_fused(
                         record(node, pred, eid, t, da, db, _COMMITTED, stance, code, c)
                     else:
                         commit(node, pred, eid, t, da, db, stance, code, c)
+                    if rivals_of is not None and da > 0.0:
+                        # rules.exclusion_increments, inlined: d_alpha against each rival class held at v
+                        for psi in rivals_of(pred):
+                            if pairs_get((node, psi)) is not None:
+                                if prov._timeline:
+                                    record(node, psi, eid, t, 0.0, da, _COMMITTED, -1, _E_EXCL, c)
+                                else:
+                                    commit(node, psi, eid, t, 0.0, da, -1, _E_EXCL, c)
                     e_committed += 1
                     if report:
                         outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))

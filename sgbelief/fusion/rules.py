@@ -17,6 +17,7 @@ weight w = w0 kappa T(v)    :func:`evidence_weight`
 increments (Eq. 3)          :func:`claim_increments`
 Eq. 3 inverted (Λ̂, w)      :func:`claim_lambda_hat`, :func:`claim_weight`
 geometric observation       :func:`verification_increments`
+a rival class's claim       :func:`exclusion_increments`
 label's own predicates      :func:`label_observations`
 revision test (KL > tau)    :func:`revision_kl_exceeds` (bound: :func:`kl_upper_bound`)
 ==========================  ==========================================================
@@ -48,6 +49,7 @@ __all__ = [
     "claim_lambda_hat",
     "claim_weight",
     "verification_increments",
+    "exclusion_increments",
     "label_observations",
     "kl_upper_bound",
     "revision_kl_exceeds",
@@ -178,6 +180,27 @@ def verification_increments(outcome: int, weight: float) -> tuple[float, float]:
         (d_alpha, d_beta) = (w T(v), 0) if outcome == 1 else (0, w T(v))
     """
     return (weight, 0.0) if outcome == 1 else (0.0, weight)
+
+
+def exclusion_increments(d_alpha: float) -> tuple[float, float]:
+    """A claim of phi as evidence about a class psi that excludes phi (``exclusive_evidence: rivals``).
+
+    The exclusive classes of an element (``SubsumptionTable.exclusive_with``) and "none of them"
+    are the categories of one categorical variable; a Dirichlet belief over it has, for each class
+    psi, the marginal Beta(alpha_psi, sum of the other categories' alphas): the per-predicate Beta.
+    A claim of phi with Eq. 3 increments (d_alpha, d_beta) puts d_alpha on the category phi and
+    d_beta on "not phi", spread over the others without saying which. Seen from psi, mass on phi is
+    mass on "not psi"; mass on "not phi" says nothing of psi against the rest. So at (v, psi)::
+
+        (d_alpha_psi, d_beta_psi) = (0, d_alpha)
+
+    An element claimed once as toilet, twice as bed and once as tv then holds for is_bed its own two
+    claims against the toilet's and the tv's: it stays below the commit threshold, where two
+    independent per-predicate Betas would commit it. The entry is written at rival pairs the log
+    already holds, under the claim's event id (retracting the claim retracts it), and only for a
+    claim committed at its own pair (a refused or quarantined claim moves nothing, here either).
+    """
+    return 0.0, d_alpha
 
 
 def label_observations(asserted: tuple[str, ...], claimed: str, node: object, t: int,

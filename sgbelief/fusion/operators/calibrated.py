@@ -28,6 +28,7 @@ from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_
     claim_increments,
     consensus_cell,
     evidence_weight,
+    exclusion_increments,
     kl_upper_bound,
     label_observations,
     revision_kl_exceeds,
@@ -119,6 +120,11 @@ class CalibratedOperator(BaseOperator):
     def observes_label(self) -> bool:
         """A decisive geometric label also observes the predicates it asserts (``geometric_evidence: label``)."""
         return self.check_compatibility and self.config.geometric_evidence == "label"
+
+    @property
+    def excludes_rivals(self) -> bool:
+        """A committed claim also counts against the classes that exclude it (``exclusive_evidence: rivals``)."""
+        return self.config.exclusive_evidence == "rivals" and self.vocabulary is not None
 
     @property
     def claims_property2(self) -> bool:
@@ -220,6 +226,8 @@ class CalibratedOperator(BaseOperator):
         else:
             prov.record(node, pred, event.id, event.t, da, db, EntryStatus.COMMITTED, stance, code, c)
             action = Action.COMMITTED
+            if self.excludes_rivals and da > 0.0:
+                self._exclude_rivals(prov, node, pred, event, da)
         if self.check_compatibility and v is _CORR:  # later agreement resolves pending ⊥ at (v, phi)
             resolutions += queues.resolve_disagreements(prov, node, pred, event.t)
         return action, v, da, db, resolutions
@@ -281,6 +289,15 @@ class CalibratedOperator(BaseOperator):
             prov.record(node, psi, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1, EntryVerdict.GEOMETRIC,
                         event.confidence)
 
+    def _exclude_rivals(self, prov: ProvenanceStore, node: Any, pred: str, event: EvidenceEvent, d_alpha: float) -> None:
+        """``exclusive_evidence: rivals``: the committed claim's d_alpha is evidence against each class
+        that excludes ``pred`` and already has a belief at v (:func:`~sgbelief.fusion.rules.exclusion_increments`)."""
+        ea, eb = exclusion_increments(d_alpha)
+        for psi in self.vocabulary.exclusive_with(pred):  # type: ignore[union-attr]
+            if (node, psi) in prov:
+                prov.record(node, psi, event.id, event.t, ea, eb, EntryStatus.COMMITTED, -1, EntryVerdict.EXCLUSION,
+                            event.confidence)
+
     def _feed_calibration(self, event: EvidenceEvent, verified: list[tuple[int, str]]) -> None:
         """Alg. 1 line 21: the event's verification outcomes join the buffer after all its targets."""
         for y, context in verified:
@@ -302,8 +319,8 @@ class CalibratedOperator(BaseOperator):
         for entry in prov.entries(node, predicate):
             if entry.status is EntryStatus.COMPACTED:
                 n += entry.n_folded
-            elif entry.verdict is EntryVerdict.GEOMETRIC:
-                continue  # an observation, not a claim (a claim's own entry carries the same id)
+            elif entry.verdict is not None and not entry.verdict.is_claim:
+                continue  # an observation (geometric, or a rival's claim), not a claim of this pair
             elif entry.event_id not in ids:
                 ids.add(entry.event_id)
                 n += 1
