@@ -28,7 +28,7 @@ Per-event work is O(1): appending a row and two dictionary updates.
 
 from __future__ import annotations
 
-from collections.abc import Hashable
+from collections.abc import Hashable, Mapping
 from typing import Any
 
 import numpy as np
@@ -59,10 +59,13 @@ def support_bucket(n: int) -> int:
 class MapConsensus:
     """Claim table, channel labels and the consensus calibration of one map (see the module docstring)."""
 
-    def __init__(self, config: CalibrationConfig, exclusive: frozenset[str]) -> None:
+    def __init__(self, config: CalibrationConfig, exclusive: frozenset[str],
+                 asserted: Mapping[str, tuple[str, ...]] | None = None) -> None:
         cc = config.consensus
         self.every, self.growth, self.bins = cc.every, cc.growth, cc.bins
         self.exclusive = exclusive
+        #: label -> the predicates it asserts (the vocabulary's positive sets): a label's initial vote
+        self.asserted = asserted or {}
         self._ds = DawidSkene(n_iter=cc.n_iter, smoothing=cc.smoothing, none_class=True)
         self.calibration = ConsensusCalibration(config.target_size, config.kappa_min, config.lr_max, config.cold_start)
         # the claim table, as parallel lists (appended per claim)
@@ -160,6 +163,7 @@ class MapConsensus:
             if node not in task_of:
                 task_of[node] = len(task_of)
         classes = sorted(set(self.pred))
+        class_set = set(classes)
         tasks = [task_of[v] for v in self.node]
         # a claim is an observation (class, confidence bin) of its context: clutter draws weak claims
         bins, ranks = self._bins()
@@ -179,16 +183,25 @@ class MapConsensus:
             votes.append(0.0)
             none_votes.append(0.0)
             vote_classes.append(None)
+        # the channel's labels: a label that asserts a class votes for it at initialisation, any
+        # other (otherprop, a class outside the vocabulary) for "none of these"; EM then learns the
+        # channel's confusion, so a vocabulary's ambiguous label ends where the claims put it
         for (node, _t), label in self.labels.items():
             task = task_of.get(node)
             if task is None:  # labelled, never claimed: says nothing about a claim
                 continue
+            classes_of_label = [p for p in self.asserted.get(label, ()) if p in class_set]
             tasks.append(task)
             workers.append(GEOMETRIC_WORKER)
             labels.append("geo:" + label)
-            votes.append(0.0)
-            none_votes.append(0.0)
-            vote_classes.append(None)
+            if classes_of_label:
+                votes.append(1.0)
+                none_votes.append(0.0)
+                vote_classes.append(classes_of_label[0])
+            else:
+                votes.append(0.0)
+                none_votes.append(1.0)
+                vote_classes.append(None)
         ds = self._ds.fit(tasks, workers, labels, classes=classes, n_tasks=len(task_of), votes=votes,
                           vote_classes=vote_classes, none_votes=none_votes)
         self.ds_ = ds

@@ -251,7 +251,8 @@ class CalibratedOperator(BaseOperator):
         """The consensus of one provenance store (created on first use)."""
         held = self._consensus.get(id(prov))
         if held is None or held[0] is not prov:
-            held = self._consensus[id(prov)] = (prov, MapConsensus(self.config.calibration, self.consensus_classes))
+            held = self._consensus[id(prov)] = (prov, MapConsensus(self.config.calibration, self.consensus_classes,
+                                                                      self.vocabulary.asserted_tables()))  # type: ignore[union-attr]
         return held[1]
 
     def _context(self, event: EvidenceEvent, n_prior_claims: int) -> str:
