@@ -180,7 +180,7 @@ def apply_fused(
                         cons.add_label(node, t, label)
                     n_same, n_others, max_other = cons.standing_counts(node, pred, rivals)
                     cell = consensus_cell(ctx, stratum, adjudication(label, y), standing(n_same, n_others, max_other))
-                    found = cons.likelihood_ratio(c, cell, pred) if y is None else None
+                    found = cons.likelihood_ratio(c, cell, pred, ctx) if y is None else None
                     cons.add_claim(node, pred, ctx, c, cell, y is not None, eid)
                     if found is not None:
                         lam, kappa = found

@@ -19,9 +19,9 @@ Mondrian calibrator does (:mod:`sgbelief.calibration.mondrian`), with l = min(1,
 
     log Lambda = l_1 log L_1 + (1 - l_1) [l_2 log L_2 + (1 - l_2) log L_cold]
 
-The cells are the claim's Mondrian cell (context, support stratum, adjudication status, standing
-among the exclusive classes claimed at v; ``sgbelief.fusion.rules.consensus_cell``) per predicate,
-then the same cell pooled over predicates. The fit is a batch computation over the claim table,
+The levels, finest first, are the claim's Mondrian cell (context, support stratum, adjudication
+status, standing among the exclusive classes claimed at v; ``sgbelief.fusion.rules.consensus_cell``)
+per predicate, the same cell pooled over predicates, and every silent claim of the context. The fit is a batch computation over the claim table,
 repeated on a geometric schedule by the operator (``sgbelief.fusion.consensus``), never per event.
 """
 
@@ -80,20 +80,21 @@ class ConsensusCalibration:
         self.kappa_min = kappa_min
         self.log_lr_max = math.log(lr_max)
         self.cold_start = cold_start
-        #: (cell, predicate) and (cell, "*") -> (knots x, knots y, n, eps)
-        self.fits_: dict[tuple[Hashable, str], tuple[list[float], list[float], int, float]] = {}
+            #: cell key -> (knots x, knots y, n, eps)
+        self.fits_: dict[Hashable, tuple[list[float], list[float], int, float]] = {}
         self.n_fit_ = 0
 
-    def fit(self, cells: Sequence[Hashable], predicates: Sequence[str], c: np.ndarray, q: np.ndarray,
+    def fit(self, levels: Sequence[Sequence[Hashable]], c: np.ndarray, q: np.ndarray,
             w: np.ndarray | None = None) -> ConsensusCalibration:
-        """Refit every cell from scratch on the claims (cell, predicate, confidence c, consensus outcome q)."""
+        """Refit every cell from scratch. ``levels[i]`` are claim i's cell keys, finest first (e.g.
+        (cell and predicate, cell, context)); ``c`` its confidence, ``q`` its consensus outcome."""
         c = np.asarray(c, dtype=np.float64)
         q = np.asarray(q, dtype=np.float64)
         w = np.ones_like(c) if w is None else np.asarray(w, dtype=np.float64)
-        groups: dict[tuple[Hashable, str], list[int]] = {}
-        for i, (cell, pred) in enumerate(zip(cells, predicates)):
-            groups.setdefault((cell, pred), []).append(i)
-            groups.setdefault((cell, "*"), []).append(i)
+        groups: dict[Hashable, list[int]] = {}
+        for i, keys in enumerate(levels):
+            for key in keys:
+                groups.setdefault(key, []).append(i)
         fits = {}
         for key, idx in groups.items():
             ix = np.asarray(idx, dtype=np.intp)
@@ -104,12 +105,11 @@ class ConsensusCalibration:
         self.n_fit_ = int(c.shape[0])
         return self
 
-    def likelihood_ratio(self, c: float, cell: Hashable, predicate: str) -> tuple[float, float]:
-        """(Lambda_hat, kappa_hat) of a claim with confidence ``c`` in ``cell`` for ``predicate``."""
+    def likelihood_ratio(self, c: float, levels: Sequence[Hashable]) -> tuple[float, float]:
+        """(Lambda_hat, kappa_hat) of a claim with confidence ``c`` whose cell keys are ``levels`` (finest first)."""
         log_lr = cold_start_log_lr(c, self.cold_start, self.log_lr_max)
         kappa = 0.0
-        # coarsest first: each finer level shrinks toward what the coarser ones give
-        for key in ((cell, "*"), (cell, predicate)):
+        for key in reversed(levels):  # coarsest first: each finer level shrinks toward the coarser ones
             fit = self.fits_.get(key)
             if fit is None:
                 continue

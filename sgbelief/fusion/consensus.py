@@ -135,11 +135,17 @@ class MapConsensus:
         n = len(self.node)
         return n - self.n_at_fit >= max(self.every, self.growth * self.n_at_fit)
 
-    def likelihood_ratio(self, confidence: float, cell: Hashable, predicate: str) -> tuple[float, float] | None:
+    @staticmethod
+    def levels(cell: Hashable, predicate: str, context: str) -> tuple[Hashable, ...]:
+        """A silent claim's calibration levels, finest first: its cell per predicate, its cell, its context."""
+        return ((cell, predicate), (cell, "*"), (context, "*", "*"))
+
+    def likelihood_ratio(self, confidence: float, cell: Hashable, predicate: str,
+                         context: str) -> tuple[float, float] | None:
         """(Lambda_hat, kappa_hat) of a silent claim from the consensus calibration, or None before the first refit."""
         if not self.calibration.fitted:
             return None
-        return self.calibration.likelihood_ratio(confidence, cell, predicate)
+        return self.calibration.likelihood_ratio(confidence, self.levels(cell, predicate, context))
 
     def refit(self) -> None:
         """Refit the Dawid–Skene model and the per-cell calibration on the whole table."""
@@ -154,7 +160,7 @@ class MapConsensus:
             return
         q = np.array([probas[task_of[self.node[i]], class_of[self.pred[i]]] for i in silent])
         c = np.array([self.conf[i] for i in silent])
-        self.calibration.fit([self.cell[i] for i in silent], [self.pred[i] for i in silent], c, q)
+        self.calibration.fit([self.levels(self.cell[i], self.pred[i], self.ctx[i]) for i in silent], c, q)
 
     def fit_consensus(self) -> tuple[np.ndarray, dict[str, int], dict[Any, int]]:
         """The Dawid–Skene posterior over classes (+ none) per element: (probas, class index, task index)."""

@@ -243,7 +243,7 @@ class CalibratedOperator(BaseOperator):
             return self.calibrator_.likelihood_ratio(c, context, pred)
         n_same, n_others, max_other = consensus.standing_counts(node, pred, self.vocabulary.exclusive_with(pred))  # type: ignore[union-attr]
         cell = consensus_cell(event.context, stratum, adjudication(label, y), standing(n_same, n_others, max_other))
-        found = consensus.likelihood_ratio(c, cell, pred) if y is None else None
+        found = consensus.likelihood_ratio(c, cell, pred, event.context) if y is None else None
         consensus.add_claim(node, pred, event.context, c, cell, y is not None, event.id)
         return found if found is not None else self.calibrator_.likelihood_ratio(c, context, pred)
 
