@@ -27,6 +27,7 @@ FULL = {
     "batched": ["bench_batched.py", "--events", "300000"],
     "parallel": ["bench_parallel.py", "--scenes", "8", "--workers", "2"],
     "queries": ["bench_queries.py", "--nodes", "10000"],
+    "refer": ["bench_refer.py", "--nodes", "10000", "--queries", "300", "--rooms", "40"],
     "latency_comod": ["bench_latency.py", "--operator", "comod", "--intervals", "default,10"],
     "latency_majority_gc_off": ["bench_latency.py", "--operator", "majority", "--intervals", "default,10", "--gc", "off"],
 }
@@ -38,6 +39,7 @@ QUICK = {
     "conceptgraphs": ["bench_conceptgraphs.py", "--frames", "2", "--sizes", "100,1000"],
     "batched": ["bench_batched.py", "--events", "50000", "--stream-events", "10000"],
     "parallel": ["bench_parallel.py", "--scenes", "4"],
+    "refer": ["bench_refer.py", "--nodes", "2000", "--queries", "50", "--rooms", "8"],
     "latency_comod": ["bench_latency.py", "--events", "60000", "--pairs", "20000", "--events-per-step", "20",
                       "--intervals", "default,10"],
 }

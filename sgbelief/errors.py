@@ -87,3 +87,18 @@ class RetractionError(SgbeliefError, LookupError):
 
 class QueueError(SgbeliefError, LookupError):
     """A queue operation on an event that is not pending (e.g. confirming a committed event)."""
+
+
+# ---------------------------------------------------------------------------------- warnings
+class SgbeliefWarning(UserWarning):
+    """Base class of every warning sgbelief issues: a condition the user should hear about that
+    does not stop the work (filter them all with ``warnings.simplefilter(..., SgbeliefWarning)``)."""
+
+
+class SgbeliefDeprecationWarning(SgbeliefWarning, DeprecationWarning):
+    """A name that moved or is going away; the message says where it lives now."""
+
+
+class InputMismatchWarning(SgbeliefWarning):
+    """Two input files only partly describe the same map (a truth or nodes file that covers some
+    of the nodes an evidence log targets): the message gives the counts."""

@@ -9,6 +9,8 @@ import importlib
 import warnings
 from typing import Any
 
+from sgbelief.errors import SgbeliefDeprecationWarning
+
 _MOVED = {"relaxed_gc": "sgbelief._fast.gc", "REPLAY_GC_THRESHOLD": "sgbelief._fast.gc"}
 
 
@@ -17,7 +19,7 @@ def __getattr__(name: str) -> Any:
     if home is None:
         raise AttributeError(f"module 'sgbelief.gc_tuning' has no attribute {name!r}")
     warnings.warn(f"sgbelief.gc_tuning.{name} moved to {home}.{name}; sgbelief.gc_tuning will be removed",
-                  DeprecationWarning, stacklevel=2)
+                  SgbeliefDeprecationWarning, stacklevel=2)
     return getattr(importlib.import_module(home), name)
 
 

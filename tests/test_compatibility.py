@@ -86,7 +86,7 @@ def test_resolve_accepts_instance_path_or_shipped_name(table: SubsumptionTable) 
     assert SubsumptionTable.resolve(table) is table
     assert SubsumptionTable.resolve("kitti360").predicates == table.predicates
     assert SubsumptionTable.resolve(config_path("vocab", "scannet.yaml")).name == "scannet"
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(ConfigError, match=r"unknown vocabulary 'no_such_vocabulary'.*kitti360, scannet"):
         SubsumptionTable.resolve("no_such_vocabulary")
 
 

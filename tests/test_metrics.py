@@ -20,6 +20,7 @@ from sgbelief.eval.metrics import (
     retrieval_f1,
     segmentation_iou,
     set_scores,
+    without_positives,
 )
 
 
@@ -33,13 +34,29 @@ def test_set_scores_hand_case():
 
 
 def test_empty_conventions():
+    # no positives: IoU, recall and F1 are undefined (n/a), committed or not
     both = set_scores(set(), set())
-    assert (both.iou, both.precision, both.recall) == (1.0, 1.0, 1.0)
+    assert all(math.isnan(x) for x in (both.iou, both.precision, both.recall, both.f1))
+    assert not both.has_positives
     nothing_committed = set_scores(set(), {"a"})
     assert (nothing_committed.iou, nothing_committed.precision, nothing_committed.recall, nothing_committed.f1) == (
         0.0, 0.0, 0.0, 0.0)
     nothing_relevant = set_scores({"a"}, set())
-    assert (nothing_relevant.iou, nothing_relevant.precision, nothing_relevant.recall) == (0.0, 0.0, 0.0)
+    assert nothing_relevant.precision == 0.0 and nothing_relevant.fp == 1
+    assert all(math.isnan(x) for x in (nothing_relevant.iou, nothing_relevant.recall, nothing_relevant.f1))
+
+
+def test_a_class_with_no_positives_is_left_out_of_the_mean():
+    """Before: a class nobody is (is_toilet indoors) scored IoU 1.0 and lifted the mean."""
+    truth = {"n1": {"is_chair": 1, "is_toilet": 0}, "n2": {"is_chair": 0, "is_toilet": 0}}
+    probs = {"n1": {"is_chair": 0.9}, "n2": {"is_chair": 0.8}}
+    sc = per_predicate_scores(probs, truth, ["is_chair", "is_toilet"])
+    assert sc["is_chair"].iou == pytest.approx(0.5)
+    assert math.isnan(sc["is_toilet"].iou)
+    assert mean_iou(sc) == pytest.approx(0.5)
+    assert without_positives(sc) == ["is_toilet"]
+    assert math.isnan(mean_iou({"is_toilet": sc["is_toilet"]}))
+    assert math.isnan(retrieval_f1({"n1"}, set()).f1)
 
 
 def test_binarize_strict():

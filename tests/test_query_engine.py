@@ -21,7 +21,8 @@ def city() -> SceneGraph:
                road_distance_px=300.0, stationary=True)
     g.add_node("c3", centroid=(100, 0, 0), bbox=((100, 0, 0), (104, 2, 1.5)), label="car", scene="s",
                road_distance_px=0.0, stationary=False)
-    g.add_node("p1", bbox=((101, 3, 0), (101.5, 3.5, 1.8)), label="person", scene="s")
+    g.add_node("p1", bbox=((101, 3, 0), (101.5, 3.5, 1.8)), label="person", scene="s", road_distance_px=40.0,
+               stationary=False)
     g.add_node("x", centroid=(200, 0, 0), scene="s", road_distance_px=5.0, stationary=True)  # no evidence
     setb(g, "c1", "is_car", 9, 1)  # 0.9
     setb(g, "c2", "is_car", 4, 1)  # 0.8

@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("sgbelief.cli.replay", "replay an evidence log through several fusion operators"),
     "bench": ("sgbelief.cli.bench", "run the simulated suites and reproduce the paper's tables"),
     "query": ("sgbelief.cli.query", "ask a compound query of a saved scene graph"),
+    "refer": ("sgbelief.cli.refer", "the one object a referring utterance names (\"the chair closest to the door\")"),
     "retrieval": ("sgbelief.cli.retrieval", "compound-query retrieval F1 per operator"),
     "import-cg": ("sgbelief.cli.import_cg", "import a saved ConceptGraphs map and replay its detections"),
     "inspect": ("sgbelief.cli.inspect", "show a saved graph's beliefs and provenance"),
@@ -55,12 +56,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=f"sgbelief {name}", description=COMMANDS[name][1])
     module.add_arguments(parser)
     args = parser.parse_args(rest)
+    import warnings
+
     from sgbelief.cli._console import route_messages, unroute_messages
-    from sgbelief.errors import SgbeliefError
+    from sgbelief.errors import SgbeliefError, SgbeliefWarning
 
     handler = route_messages(name)
     try:
-        rc = int(module.run(args) or 0)
+        with warnings.catch_warnings():
+            # a command's own warnings are messages to its user: each one a line on stderr, whatever
+            # the interpreter's filters (a test suite that makes them errors reads them there)
+            warnings.simplefilter("always", SgbeliefWarning)
+            rc = int(module.run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit flush
         return rc
     except BrokenPipeError:
@@ -70,11 +77,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SgbeliefError as exc:
         print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
         return 1
-    except FileNotFoundError as exc:
-        print(f"sgbelief {name}: error: {exc}", file=sys.stderr)
+    except OSError as exc:  # a file that is not there, or cannot be read or written
+        if exc.filename is None and not isinstance(exc, FileNotFoundError):
+            raise
+        print(f"sgbelief {name}: error: {_os_error(exc)}", file=sys.stderr)
         return 1
     finally:
         unroute_messages(handler)
+
+
+def _os_error(exc: OSError) -> str:
+    """One line naming the file: ``events.jsonl: no such file or directory`` (not ``[Errno 2] ...``)."""
+    if exc.filename is None or exc.strerror is None:  # raised with a message of its own
+        return str(exc)
+    return f"{exc.filename}: {exc.strerror[:1].lower()}{exc.strerror[1:]}"
 
 
 def _silence_stdout() -> None:

@@ -55,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from sgbelief.errors import ConfigError
     from sgbelief.eval.formats import ReadStats, iter_events, read_truth
-    from sgbelief.eval.replay import format_table, make_runs, replay, require_events, score_run
+    from sgbelief.eval.replay import evidence_nodes, format_table, make_runs, replay, require_events, score_run
     from sgbelief.fusion.config import OperatorConfig
     from sgbelief.graph.persistence import atomic_write_text
 
@@ -80,28 +80,56 @@ def run(args: argparse.Namespace) -> int:
     finally:
         progress.close()
     require_events(stats, args.events)  # an empty log: an error, and no saved graph overwritten
+    log_nodes = evidence_nodes(runs)
+    coverage = _truth_coverage(truth, log_nodes, args.truth, args.events)
+    attrs = _nodes_for_saving(args, log_nodes) if args.save_graph else None
     preds = _predicates(vocab, truth, args.predicates)
     scores = {r.name: score_run(r, truth, preds, tau=args.tau) for r in runs}
     print(f"{stats.events} events replayed from {args.events}" + (f" ({stats.skipped} bad lines skipped)" if stats.skipped else ""))
+    print(coverage)
     print(format_table(scores, preds))
-    print(_miou_note(preds))
+    print(_miou_note(preds, scores))
     if args.json_out:
         doc = {name: sc.as_dict() for name, sc in scores.items()}
         for d in doc.values():
             d["skipped_lines"] = stats.skipped
         atomic_write_text(args.json_out, json.dumps(doc, indent=2, allow_nan=True))
     if args.save_graph:
-        nodes_file = args.nodes if args.nodes is not None else Path(args.events).with_name("nodes.json")
-        attrs = _node_attributes(nodes_file) if (args.nodes is not None or nodes_file.is_file()) else None
-        if attrs is None:
-            log.warning("no nodes.json beside %s: the saved graphs carry no geometry, so geometric and named "
-                        "queries on them find nothing (--nodes gives one)", args.events)
         for r in runs:
             if attrs is not None:
                 for node, a in attrs.items():
                     r.graph.add_node(node, **a)
             r.graph.save(args.save_graph / r.name, format=args.graph_format)
     return 0
+
+
+def _truth_coverage(truth, log_nodes: set, truth_path: Path, events: object) -> str:
+    """Check that the truth file describes the log's nodes (none: an error; some: a warning) and
+    say how much of the truth the log reaches."""
+    from sgbelief.eval.replay import check_coverage
+
+    scored = check_coverage("truth file", truth, log_nodes, path=truth_path, log=events,
+                            missing_means="they are not scored")
+    rest = len(truth) - scored
+    return (f"truth: {scored} of the {len(truth)} nodes of {truth_path} have evidence in the log"
+            + (f"; the other {rest} stay at the prior (not committed: a miss where the truth says 1)" if rest else ""))
+
+
+def _nodes_for_saving(args: argparse.Namespace, log_nodes: set) -> dict[str, dict] | None:
+    """The node attributes the saved graphs carry: --nodes, else nodes.json beside the log (None:
+    neither, said as a warning). A nodes file that names none of the log's nodes is an error, one
+    that misses some a warning."""
+    from sgbelief.eval.replay import check_coverage
+
+    nodes_file = args.nodes if args.nodes is not None else Path(args.events).with_name("nodes.json")
+    if args.nodes is None and not nodes_file.is_file():
+        log.warning("no nodes.json beside %s: the saved graphs carry no geometry, so geometric and named "
+                    "queries on them find nothing (--nodes gives one)", args.events)
+        return None
+    attrs = _node_attributes(nodes_file)
+    check_coverage("nodes file", attrs, log_nodes, path=nodes_file, log=args.events,
+                   missing_means="the saved graphs carry no geometry for them, so geometric queries cannot retrieve them")
+    return attrs
 
 
 def _node_attributes(path: Path) -> dict[str, dict]:
@@ -127,8 +155,14 @@ def _predicates(vocab, truth, chosen: str | None = None) -> list[str]:
     return preds
 
 
-def _miou_note(preds: list[str]) -> str:
-    return f"mIoU: unweighted mean IoU over these {len(preds)} predicates ({', '.join(preds)})"
+def _miou_note(preds: list[str], scores) -> str:
+    from sgbelief.eval.replay import no_positives_note
+
+    counted = preds
+    if no_positives_note(scores, preds):
+        first = next(iter(scores.values()))
+        counted = [p for p in preds if first.per_predicate[p].has_positives]
+    return f"mIoU: unweighted mean IoU over these {len(counted)} predicates ({', '.join(counted) or 'none'})"
 
 
 def _run_scenes(args: argparse.Namespace, names: list[str], truth, vocab, config) -> int:
@@ -142,13 +176,16 @@ def _run_scenes(args: argparse.Namespace, names: list[str], truth, vocab, config
                      args.engine)
             for e in args.events]
     results = run_scenes(replay_scene, jobs, workers=args.workers, executor=args.executor)
+    log_nodes = {node for r in results for pairs in r.evidence_pairs.values() for node, _ in pairs}
+    coverage = _truth_coverage(truth, log_nodes, args.truth, ", ".join(map(str, args.events)))
     preds = _predicates(vocab, truth, args.predicates)
     scores = pool_scene_scores(results, truth, preds, tau=args.tau)
     n = sum(r.n_events for r in results)
     skipped = sum(r.skipped for r in results)
     print(f"{n} events replayed from {len(results)} scenes" + (f" ({skipped} bad lines skipped)" if skipped else ""))
+    print(coverage)
     print(format_table(scores, preds))
-    print(_miou_note(preds))
+    print(_miou_note(preds, scores))
     if args.json_out:
         doc = {name: sc.as_dict() for name, sc in scores.items()}
         for d in doc.values():

@@ -13,6 +13,8 @@ import importlib
 import warnings
 from typing import Any
 
+from sgbelief.errors import SgbeliefDeprecationWarning
+
 _MOVED = {
     "EventColumns": "sgbelief._fast.batched",
     "batched_replay": "sgbelief._fast.batched",
@@ -27,13 +29,13 @@ _BATCHED_OPERATORS = ("majority", "naive_bayes", "overwrite")
 def __getattr__(name: str) -> Any:
     if name == "BATCHED_OPERATORS":
         warnings.warn("sgbelief.eval.batched.BATCHED_OPERATORS is deprecated: the batched engine takes any "
-                      "operator whose pair_rule is not None", DeprecationWarning, stacklevel=2)
+                      "operator whose pair_rule is not None", SgbeliefDeprecationWarning, stacklevel=2)
         return _BATCHED_OPERATORS
     home = _MOVED.get(name)
     if home is None:
         raise AttributeError(f"module 'sgbelief.eval.batched' has no attribute {name!r}")
     warnings.warn(f"sgbelief.eval.batched.{name} moved to {home}.{name}; sgbelief.eval.batched will be removed",
-                  DeprecationWarning, stacklevel=2)
+                  SgbeliefDeprecationWarning, stacklevel=2)
     return getattr(importlib.import_module(home), name)
 
 

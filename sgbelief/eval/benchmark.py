@@ -264,9 +264,11 @@ def _plot_reliability(ax: Any, raw: Any, cal: Any, title: str) -> None:
            zorder=0, label=f"raw claims per bin (n = {int(raw.counts.sum())}; tallest = {int(raw.counts.max())})")
     ax.set_xlabel("confidence / calibrated probability")
     ax.set_ylabel("observed frequency")
-    ax.set_xlim(0, 1), ax.set_ylim(0, 1)
+    # a little room above 1: a bin whose claims are all right (observed frequency 1) stays in view
+    ax.set_xlim(0, 1), ax.set_ylim(0, 1.05)
     ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=7, loc="upper left")
+    # under the axes, where no point can be: inside, some panel always has points in the corner
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), borderaxespad=0.0)
 
 
 def make_figures(results: dict[str, Any], out: Path, real: dict[str, Any], sim_cal: dict[str, Any], traces: dict[str, Any]) -> list[Path]:
@@ -279,7 +281,7 @@ def make_figures(results: dict[str, Any], out: Path, real: dict[str, Any], sim_c
     paths: list[Path] = []
     # Figure 1: (a) trace, (b) reliability, (c) final posteriors
     suite = next((s for s in ("outdoor", "indoor") if traces.get(s)), None)
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.8))
     if suite is not None:
         tr = traces[suite]
         truth = tr.get("truth", 0)
@@ -311,7 +313,7 @@ def make_figures(results: dict[str, Any], out: Path, real: dict[str, Any], sim_c
     paths.append(p)
     # reliability diagrams for every calibration source
     sources = [(f"sim {k}", v) for k, v in sim_cal.items()] + [(f"real {k}", v) for k, v in real.items()]
-    fig, axes = plt.subplots(1, len(sources), figsize=(4 * len(sources), 3.8), squeeze=False)
+    fig, axes = plt.subplots(1, len(sources), figsize=(4 * len(sources), 4.6), squeeze=False)
     for ax, (title, rep) in zip(axes[0], sources):
         _plot_reliability(ax, *rep["_bins"], title)
     fig.tight_layout()
@@ -477,7 +479,8 @@ def _jsonable(x: Any) -> Any:
 
 # --------------------------------------------------------------------------- markdown
 def _f(x: Any, d: int = 3) -> str:
-    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{d}f}"
+    """A number as the tables print it; n/a where it is undefined (nan, or None once in JSON)."""
+    return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{d}f}"
 
 
 def _summary_table(results: dict[str, Any]) -> list[str]:
@@ -526,6 +529,11 @@ def render_markdown(results: dict[str, Any]) -> str:
                 lines.append(f"| {name_} | " + " | ".join(f"{_f(pp[p]['iou'])} ({_f(pp[p]['precision'], 2)} / "
                                                           f"{_f(pp[p]['recall'], 2)})" for p in preds)
                              + f" | {_f(sc['mean_iou'])} | {_f(sc['brier'], 4)} | {sc['refusals']} |")
+            first = next(iter(res[key].values()))["per_predicate"]
+            empty = [p for p in preds if first[p]["tp"] + first[p]["fn"] == 0]
+            if empty:
+                lines.append(f"\nn/a: {', '.join(empty)} {'has' if len(empty) == 1 else 'have'} no positives in this "
+                             "suite's truth, so IoU and recall are undefined there; left out of the mean IoU.")
             lines.append("")
         if "table5" in res:
             t5 = res["table5"]
@@ -571,6 +579,8 @@ def render_markdown(results: dict[str, Any]) -> str:
                 first = next(iter(row.values()))
                 lines.append(f"| {q} | {first['n']} | {100 * first['pos_rate']:.1f} | "
                              + " | ".join(_f(row[o]["f1"]) if o in row else "–" for o in ops) + " |")
+            if any(r["positives"] == 0 for r in res["retrieval"]):
+                lines.append("\nn/a: a compound with no positives in its pool has no F1.")
         elif "retrieval_error" in res:
             lines += ["", f"Retrieval table not produced: {res['retrieval_error']}"]
         lines.append("")

@@ -1,11 +1,14 @@
 """Evaluation metrics (pure functions, no operator knowledge).
 
-Conventions on empty sets (chosen so that "nothing to find and nothing claimed" is perfect and an
-operator that commits nothing on a class with positives scores 0, as in the paper's tables):
+Conventions on empty sets (chosen so that a class with nothing to find is not scored at all, and
+an operator that commits nothing on a class with positives scores 0, as in the paper's tables):
 
-* IoU = |C ∩ R| / |C ∪ R|; 1.0 when C ∪ R = ∅.
-* precision = |C ∩ R| / |C|; when C = ∅: 1.0 if R = ∅ else 0.0.
-* recall = |C ∩ R| / |R|; when R = ∅: 1.0 if C = ∅ else 0.0.
+* no positives (R = ∅): IoU, recall and F1 are undefined (nan, shown "n/a"), whatever was
+  committed; precision is 0.0 if something was committed (C ≠ ∅), else nan. A mean over classes
+  (:func:`mean_iou`) leaves such a class out, so it can neither inflate nor deflate the mean.
+* IoU = |C ∩ R| / |C ∪ R|.
+* precision = |C ∩ R| / |C|; 0.0 when C = ∅ (and R ≠ ∅).
+* recall = |C ∩ R| / |R|.
 * F1 = 2PR / (P + R); 0.0 when P + R = 0.
 
 Here C is the committed / retrieved set and R the relevant (true) set.  Calibration metrics share
@@ -30,6 +33,7 @@ __all__ = [
     "set_scores",
     "per_predicate_scores",
     "mean_iou",
+    "without_positives",
     "brier_score",
     "brier_over_pairs",
     "reliability_bins",
@@ -55,17 +59,24 @@ class SetScores:
     fp: int
     fn: int
 
+    @property
+    def has_positives(self) -> bool:
+        """Whether the relevant set is non-empty (else IoU, recall and F1 are nan: n/a)."""
+        return self.tp + self.fn > 0
+
     def as_dict(self) -> dict[str, float | int]:
-        """Plain dict (JSON-ready)."""
+        """Plain dict (JSON-ready; nan where a score is undefined)."""
         return {"iou": self.iou, "precision": self.precision, "recall": self.recall, "f1": self.f1,
                 "tp": self.tp, "fp": self.fp, "fn": self.fn}
 
 
 def _scores(tp: int, fp: int, fn: int) -> SetScores:
-    union = tp + fp + fn
-    iou = 1.0 if union == 0 else tp / union
-    precision = (1.0 if fn == 0 else 0.0) if tp + fp == 0 else tp / (tp + fp)
-    recall = (1.0 if fp == 0 else 0.0) if tp + fn == 0 else tp / (tp + fn)
+    if tp + fn == 0:  # no positives: nothing to find, so no IoU, recall or F1
+        precision = 0.0 if fp else math.nan
+        return SetScores(math.nan, precision, math.nan, math.nan, tp, fp, fn)
+    iou = tp / (tp + fp + fn)
+    precision = 0.0 if tp + fp == 0 else tp / (tp + fp)
+    recall = tp / (tp + fn)
     f1 = 0.0 if precision + recall == 0 else 2 * precision * recall / (precision + recall)
     return SetScores(iou, precision, recall, f1, tp, fp, fn)
 
@@ -116,8 +127,15 @@ def per_predicate_scores(
 
 
 def mean_iou(scores: Mapping[str, SetScores]) -> float:
-    """Unweighted mean of the per-predicate IoU (nan for no predicates)."""
-    return float(np.mean([s.iou for s in scores.values()])) if scores else math.nan
+    """Unweighted mean of the per-predicate IoU over the predicates with positives (a class with
+    none has no IoU and is left out; nan when no predicate has positives)."""
+    vals = [s.iou for s in scores.values() if s.has_positives]
+    return float(np.mean(vals)) if vals else math.nan
+
+
+def without_positives(scores: Mapping[str, SetScores]) -> list[str]:
+    """The predicates whose relevant set is empty: IoU n/a, left out of :func:`mean_iou`."""
+    return [p for p, s in scores.items() if not s.has_positives]
 
 
 def brier_score(probabilities: ArrayLike, outcomes: ArrayLike) -> float:

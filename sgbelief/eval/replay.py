@@ -8,17 +8,18 @@ Metrics compare the end-of-stream maps with ground truth (truth is never shown t
 from __future__ import annotations
 
 import time
+import warnings
 from itertools import islice
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from sgbelief._fast.gc import relaxed_gc
 from sgbelief.api.operators import make_operator
-from sgbelief.errors import FormatError, SgbeliefError, UnknownPredicateError
+from sgbelief.errors import FormatError, InputMismatchWarning, SgbeliefError, UnknownPredicateError
 from sgbelief.eval.formats import EventRecord, ReadStats, iter_events
-from sgbelief.eval.metrics import SetScores, brier_over_pairs, mean_iou, per_predicate_scores
+from sgbelief.eval.metrics import SetScores, brier_over_pairs, mean_iou, per_predicate_scores, without_positives
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
@@ -243,6 +244,38 @@ def require_events(stats: ReadStats, source: object) -> None:
         raise FormatError(f"no evidence events to replay ({why}; {stats.lines} lines read)", path=source)
 
 
+def evidence_nodes(runs: Sequence[OperatorRun]) -> set[Any]:
+    """The nodes some run holds evidence on (a provenance entry): the nodes the log scored."""
+    return {node for r in runs for node, _ in r.graph.provenance.pairs()}
+
+
+def _examples(nodes: Iterable[Any], k: int = 3) -> str:
+    shown = sorted(map(str, nodes))
+    return ", ".join(shown[:k]) + (", ..." if len(shown) > k else "")
+
+
+def check_coverage(kind: str, covered: Collection[Any], log_nodes: Collection[Any], *, path: object,
+                   log: object, missing_means: str) -> int:
+    """How much of the log a second input file (a truth or a nodes file) describes.
+
+    ``covered``: the node ids the file has; ``log_nodes``: the nodes the evidence log holds
+    evidence on. No shared node is a :class:`FormatError` naming the file (a file of another
+    scene or suite); a partial overlap is an :class:`InputMismatchWarning` with the counts, saying
+    what happens to the uncovered nodes (``missing_means``). Returns how many log nodes it covers."""
+    shared = sum(1 for n in log_nodes if n in covered)
+    if log_nodes and not shared:
+        raise FormatError(
+            f"{kind} shares no node with the evidence log {log} ({len(covered)} nodes here, e.g. "
+            f"{_examples(covered) or 'none'}; {len(log_nodes)} in the log, e.g. {_examples(log_nodes)}): "
+            "is it the file of another scene or suite?", path=path)
+    if shared < len(log_nodes):
+        lacking = [n for n in log_nodes if n not in covered]
+        warnings.warn(InputMismatchWarning(
+            f"{path}: {len(lacking)} of the {len(log_nodes)} nodes with evidence in {log} are not in this {kind} "
+            f"(e.g. {_examples(lacking)}); {missing_means}"), stacklevel=2)
+    return shared
+
+
 def replay_file(
     events: str | Path,
     operators: Sequence[str | FusionOperator] = OPERATOR_NAMES,
@@ -301,10 +334,31 @@ def format_table(scores: Mapping[str, OperatorScores], predicates: Sequence[str]
         row = f"{name:<12}"
         for p in predicates:
             s = sc.per_predicate[p]
-            row += f"{s.iou:>10.3f}/{s.precision:.3f}/{s.recall:.3f}"
-        row += f"{sc.mean_iou:>7.3f}{sc.brier:>8.4f}{sc.refusals:>9d}{sc.quarantined:>7d}{sc.released:>6d}{sc.events_per_s:>11.0f}"
+            row += f"{_num(s.iou):>10}/{_num(s.precision)}/{_num(s.recall)}"
+        row += f"{_num(sc.mean_iou):>7}{_num(sc.brier, 4):>8}{sc.refusals:>9d}{sc.quarantined:>7d}{sc.released:>6d}{sc.events_per_s:>11.0f}"
         lines.append(row)
-    return "\n".join(lines)
+    note = no_positives_note(scores, predicates)
+    return "\n".join(lines + ([note] if note else []))
+
+
+def _num(x: float, digits: int = 3) -> str:
+    """A score as the tables print it: n/a where it is undefined (nan)."""
+    return "n/a" if x != x else f"{x:.{digits}f}"
+
+
+def no_positives_note(scores: Mapping[str, OperatorScores], predicates: Sequence[str]) -> str:
+    """The line under a score table naming the predicates with no positives in the truth (IoU and
+    recall n/a, left out of mIoU); empty when every predicate has some. Positives depend on the
+    truth alone, so any operator's scores tell."""
+    first = next(iter(scores.values()), None)
+    if first is None:
+        return ""
+    empty = without_positives({p: first.per_predicate[p] for p in predicates})
+    if not empty:
+        return ""
+    verb = "has" if len(empty) == 1 else "have"
+    return (f"n/a: {', '.join(empty)} {verb} no positives in the truth file (no node is one), so IoU and recall "
+            f"are undefined there; left out of mIoU")
 
 
 # ------------------------------------------------------------------ many scenes

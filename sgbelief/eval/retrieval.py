@@ -300,10 +300,16 @@ def format_scores(scores: Sequence[CompoundScore], title: str = "") -> str:
         if first.group != group and first.group:
             group = first.group
             lines.append(f"[{group}]")
-        cells = "  ".join(f"{d[o].f1:>11.3f}" if o in d else f"{'':>11}" for o in ops)
+        cells = "  ".join(f"{_f1_cell(d[o].f1):>11}" if o in d else f"{'':>11}" for o in ops)
         lines.append(f"{first.title.ljust(w)}  {first.n:>6d}  {100 * first.pos_rate:>6.1f}  {cells}")
-    lines.append("(F1 at P > tau over the full pool; n = nodes targeted by the VLM-typed predicate's events)")
+    lines.append("(F1 at P > tau over the full pool; n = nodes targeted by the VLM-typed predicate's events; "
+                 "n/a: no positives in the pool, so F1 is undefined)")
     return "\n".join(lines)
+
+
+def _f1_cell(f1: float) -> str:
+    """An F1 as the tables print it: n/a where it is undefined (a compound with no positives)."""
+    return "n/a" if f1 != f1 else f"{f1:.3f}"
 
 
 def _queries_for(spec: str | Path | Mapping[str, NamedQuery]) -> tuple[dict[str, NamedQuery], RelationConfig]:

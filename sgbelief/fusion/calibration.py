@@ -11,6 +11,8 @@ import importlib
 import warnings
 from typing import Any
 
+from sgbelief.errors import SgbeliefDeprecationWarning
+
 #: where each name now lives, searched in this order
 _HOMES = (
     "sgbelief.calibration.mondrian",
@@ -26,7 +28,7 @@ def __getattr__(name: str) -> Any:
         module = importlib.import_module(home)
         if name in getattr(module, "__all__", ()):
             warnings.warn(
-                f"sgbelief.fusion.calibration is deprecated: import {name} from {home}", DeprecationWarning, stacklevel=2
+                f"sgbelief.fusion.calibration is deprecated: import {name} from {home}", SgbeliefDeprecationWarning, stacklevel=2
             )
             return getattr(module, name)
     raise AttributeError(f"module 'sgbelief.fusion.calibration' has no attribute {name!r}")

@@ -18,7 +18,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from sgbelief.errors import ConfigError, FormatError, UnknownPredicateError
+from sgbelief.errors import ConfigError, FormatError, SgbeliefDeprecationWarning, UnknownPredicateError
 
 
 class Verdict(str, Enum):
@@ -187,15 +187,20 @@ class SubsumptionTable:
         derives a table from a detector class list, a taxonomy and an optional label mapping."""
         home, name_there = _FROM_CLASS_LIST_HOME
         warnings.warn(f"SubsumptionTable.from_class_list is deprecated; use {home}.{name_there}",
-                      DeprecationWarning, stacklevel=2)
+                      SgbeliefDeprecationWarning, stacklevel=2)
         derive = getattr(importlib.import_module(home), name_there)  # a deprecated alias: no import arrow
         return derive(classes, taxonomy, mapping, ignore=ignore, name=name)  # type: ignore[no-any-return]
 
     @classmethod
     def shipped(cls, name: str) -> SubsumptionTable:
-        """One of the vocabularies in ``sgbelief/configs/vocab`` (``scannet``, ``kitti360``)."""
-        from sgbelief.resources import config_path
+        """One of the vocabularies in ``sgbelief/configs/vocab`` (``scannet``, ``kitti360``); an
+        unknown name is a :class:`ConfigError` listing the shipped ones."""
+        from sgbelief.resources import config_dir, config_path
 
+        known = sorted(p.stem for p in (config_dir() / "vocab").glob("*.yaml"))
+        if name not in known:
+            raise ConfigError(f"unknown vocabulary {name!r}: give a vocabulary YAML file or a shipped name "
+                              f"({', '.join(known) or 'none found under ' + str(config_dir() / 'vocab')})")
         return cls.from_yaml(config_path("vocab", f"{name}.yaml"))
 
     @classmethod

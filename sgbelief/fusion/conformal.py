@@ -7,10 +7,12 @@ import importlib
 import warnings
 from typing import Any
 
+from sgbelief.errors import SgbeliefDeprecationWarning
+
 _HOME = "sgbelief.calibration.conformal"
 
 
 def __getattr__(name: str) -> Any:
     value = getattr(importlib.import_module(_HOME), name)  # AttributeError for an unknown name
-    warnings.warn(f"sgbelief.fusion.conformal is deprecated: import {name} from {_HOME}", DeprecationWarning, stacklevel=2)
+    warnings.warn(f"sgbelief.fusion.conformal is deprecated: import {name} from {_HOME}", SgbeliefDeprecationWarning, stacklevel=2)
     return value

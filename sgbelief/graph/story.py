@@ -34,7 +34,8 @@ from sgbelief.graph.provenance_log import (
 )
 from sgbelief.graph.scene_graph import SceneGraph
 
-__all__ = ["NOT_RECORDED", "NOT_RECORDED_OLD", "FoldedStory", "StoryEvent", "BeliefStory", "explain"]
+__all__ = ["NOT_RECORDED", "NOT_RECORDED_OLD", "STORY_KEY", "FoldedStory", "StoryEvent", "BeliefStory", "explain",
+           "render_story"]
 
 #: statuses of an entry that arrived with a ⊥ verdict (it went through the disagreement queue Q⊥)
 REFUSAL_STATUSES = frozenset(
@@ -126,6 +127,17 @@ class BeliefStory:
     @property
     def n_entries(self) -> int:
         return sum(self.counts.values())
+
+    def render(self, limit: int = 40, *, key: bool = True) -> str:
+        """The story as text, as ``sgbelief explain`` prints it (``limit`` live events at most, 0 =
+        all; ``key``: end with the key to the columns and what the log does not record)."""
+        lines = render_story(self, limit)
+        if key:
+            lines += [f"key: {STORY_KEY}.", f"note: {self.not_recorded}."]
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.render()
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict of the whole story (what ``sgbelief explain --json`` prints)."""
@@ -277,3 +289,64 @@ def explain(graph: SceneGraph, node: Any, predicate: str, *, tau: float = 0.5) -
                            verdicts, n_claims, mean_lam),
         not_recorded=NOT_RECORDED if complete or not counts else f"{NOT_RECORDED}; {NOT_RECORDED_OLD}",
     )
+
+
+# ------------------------------------------------------------------------------ text
+_STANCE_MARK = {"supports": "+", "denies": "-", "neutral": "0"}
+_HEADER = (f"    {'t':>7}  {'event':<16} {'v':<3} {'c':>5} {'Λ̂':>8} {'w·T(v)':>7} {'dα':>8} {'dβ':>8}  "
+           "± status")
+
+
+def _num(x: float | None, spec: str) -> str:
+    return "·" if x is None else format(x, spec)
+
+
+def _fmt_event(e: Any) -> str:
+    verdict = {"geometric": "geo"}.get(e.verdict, e.verdict) if e.verdict is not None else "·"
+    counted = "" if e.counted else " (not counted)"
+    corr = f", corroborated by {', '.join(e.corroborated_by)}" if e.corroborated_by else ""
+    return (f"    {e.t:>7}  {str(e.event_id):<16} {verdict:<3} {_num(e.confidence, '.3f'):>5} "
+            f"{_num(e.lambda_hat, '.3f'):>7} {_num(e.weight, '.3f'):>7} {e.d_alpha:>+8.4f} {e.d_beta:>+8.4f}  "
+            f"{_STANCE_MARK.get(e.stance, e.stance)} {e.status}{counted}{corr}")
+
+
+def render_story(story: BeliefStory, limit: int = 40) -> list[str]:
+    """The text lines of one story, as ``sgbelief explain`` prints them: the belief and counts,
+    what compaction folded, the live events in time order (at most ``limit``, the first and last
+    halves; 0 = all) and the sentence saying why the pair is or is not committed."""
+    lines = [f"{story.node!r} {story.predicate}: Beta({story.alpha:.3f}, {story.beta:.3f}), "
+             f"P = {story.probability:.3f}; {count_phrase(story.counts)}"]
+    if story.verdicts:
+        mean = (f"; mean Λ̂ {story.mean_lambda_hat:.3f} over {story.n_claims} claims"
+                if story.mean_lambda_hat is not None else "")
+        lines.append(f"  verdicts: {verdict_phrase(story.verdicts)}{mean}")
+    f = story.folded
+    if f is not None:
+        span = f"t={f.t_first}..{f.t_last}" if f.t_first is not None else f"up to t={f.t_last}"
+        ids = (f"first {f.first_event_id}, last {f.last_event_id}" if f.first_event_id is not None
+               else "event ids not recorded")
+        lines.append(f"  compacted ({span}): {count_phrase(f.counts)}")
+        if f.verdicts or f.mean_lambda_hat is not None:
+            mean = (f"; mean Λ̂ {f.mean_lambda_hat:.3f} over {f.n_lambda_hat} claims"
+                    if f.mean_lambda_hat is not None else "")
+            lines.append(f"    verdicts: {verdict_phrase(f.verdicts) or 'none recorded'}{mean}")
+        lines.append(f"    counted sum dα={f.d_alpha:+.4f} dβ={f.d_beta:+.4f}; {ids}")
+    events = story.events
+    if events:
+        lines.append(f"  live events ({len(events)}, time order):")
+        lines.append(_HEADER)
+        if limit and len(events) > limit:
+            head, tail = events[: limit // 2], events[-(limit - limit // 2):]
+            lines += [_fmt_event(e) for e in head]
+            lines.append(f"    ... {len(events) - len(head) - len(tail)} more (--limit 0 or --json for all)")
+            lines += [_fmt_event(e) for e in tail]
+        else:
+            lines += [_fmt_event(e) for e in events]
+    lines.append(f"  {story.sentence}")
+    return lines
+
+
+#: the key under the tables
+STORY_KEY = ("v: verdict (⊤ corroborated, ⊥ contradicted, ∅ no geometric claim, geo: the geometric label "
+          "observed as evidence); c: the event's confidence; Λ̂: calibrated likelihood ratio; w·T(v): "
+          "weight; ±: stance; · = not recorded")

@@ -5,6 +5,9 @@
     res = run_query(graph, P("is_car") & P("is_stationary") & ~P("is_near_pedestrian"), tau=0.6)
     for m in res: print(m.explain())
 
+    ans = refer(graph, "the trash can that is closest to the doors")   # one object (sgbelief.query.referring)
+    ans.best, ans.ranked, print(ans.explain())
+
 See docs/queries.md for the grammar, the probability model and the built-in predicates.
 """
 
@@ -13,6 +16,7 @@ from __future__ import annotations
 from sgbelief.query.engine import Component, Match, QueryEngine, QueryResult, run_query
 from sgbelief.query.language import Compound, Literal, P, QueryPredicateError, QuerySyntaxError, parse
 from sgbelief.query.named import NamedQuery, find_named_query, load_query_set, named_queries
+from sgbelief.query.referring import ReferAnswer, ReferringQuery, Relation, UtteranceError, parse_utterance, refer
 from sgbelief.query.relations import (
     DEFAULT_REGISTRY,
     GeometryContext,
@@ -28,4 +32,5 @@ __all__ = [
     "QueryEngine", "QueryPredicateError", "QueryResult", "QuerySyntaxError", "RelationConfig",
     "RelationRegistry", "find_named_query", "load_query_set", "materialise_relations", "named_queries",
     "parse", "register_relation", "relation", "run_query",
+    "ReferAnswer", "ReferringQuery", "Relation", "UtteranceError", "parse_utterance", "refer",
 ]

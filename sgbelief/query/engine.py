@@ -28,6 +28,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from sgbelief.errors import SgbeliefWarning
 from sgbelief.graph.scene_graph import SceneGraph
 from sgbelief.query.language import Compound, Literal, QueryPredicateError, QuerySyntaxError, parse
 from sgbelief.query.named import UnknownNamedQueryError, find_named_query, suggest_named_queries
@@ -39,7 +40,7 @@ BELIEF = "belief"
 GEOMETRIC = "geometric"
 
 
-class MissingGeometryWarning(UserWarning):
+class MissingGeometryWarning(SgbeliefWarning):
     """A query's geometric predicate cannot be evaluated on some candidates: they lack the node
     attributes it needs (a map saved without geometry), so it counts as false for them."""
 
@@ -47,13 +48,17 @@ class MissingGeometryWarning(UserWarning):
 def missing_attributes(attrs: Mapping[str, Any], needs: Iterable[str]) -> list[str]:
     """The needs of a geometric predicate that a node's attributes do not meet. A need is an
     attribute name, alternatives joined by ``|``, ``name?`` (optional) or ``scene`` (the other
-    nodes of the map, not an attribute of this one)."""
+    nodes of the map, not an attribute of this one). An attribute is looked up as the relations
+    read it (:meth:`GeometryContext.attr`): at the top level, else inside the node's nested
+    ``attributes`` dict (a nodes.json entry's)."""
+    inner = attrs.get("attributes")
+    nested: Mapping[str, Any] = inner if isinstance(inner, Mapping) else {}
     out = []
     for need in needs:
         alternatives = need.split("|")
         if need.endswith("?") or "scene" in alternatives:
             continue
-        if not any(a in attrs for a in alternatives):
+        if not any(a in attrs or nested.get(a) is not None for a in alternatives):
             out.append(need)
     return out
 
@@ -390,7 +395,9 @@ class QueryEngine:
             if kinds[lit.name] != GEOMETRIC:
                 continue
             needs = self.registry.get(lit.name).needs
-            lacking = [missing_attributes(node_attrs[n], needs) for n in pool if n in node_attrs]
+            # as geometric_many reads them: a precomputed value first, then the node's attributes
+            lacking = [missing_attributes(node_attrs[n], needs) for n in pool
+                       if n in node_attrs and not self._precomputed(node_attrs[n], lit.name)]
             n_lacking = sum(1 for m in lacking if m)
             if n_lacking:
                 wanted = sorted({need for m in lacking for need in m})
@@ -399,6 +406,12 @@ class QueryEngine:
                     f"{', '.join(wanted)} it needs, so the query cannot retrieve them (was the map saved "
                     "without node geometry? replay --save-graph keeps it when the log has a nodes.json)"),
                     stacklevel=3)
+
+    def _precomputed(self, attrs: Mapping[str, Any], name: str) -> bool:
+        """Whether :meth:`geometric_many` takes ``name``'s value from the node's precomputed
+        ``geometric_predicates`` rather than from the registry."""
+        pre = attrs.get("geometric_predicates") if self.use_precomputed else None
+        return isinstance(pre, Mapping) and pre.get(name) is not None
 
     def evaluate_many(self, exprs: Mapping[str, str | Compound] | Iterable[str | Compound], **kw: Any) -> dict[str, QueryResult]:
         """Evaluate a batch sharing this engine's caches; keys are the names (or expressions)."""

@@ -8,6 +8,8 @@ import importlib
 import warnings
 from typing import Any
 
+from sgbelief.errors import SgbeliefDeprecationWarning
+
 _NEW_HOME = "sgbelief.eval.retrieval"
 
 
@@ -15,7 +17,7 @@ def __getattr__(name: str) -> Any:
     if name.startswith("__"):
         raise AttributeError(name)
     warnings.warn(f"sgbelief.query.retrieval is deprecated; import {name} from {_NEW_HOME}",
-                  DeprecationWarning, stacklevel=2)
+                  SgbeliefDeprecationWarning, stacklevel=2)
     return getattr(importlib.import_module(_NEW_HOME), name)
 
 
