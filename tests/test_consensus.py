@@ -23,7 +23,7 @@ from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.consensus import MapConsensus, support_bucket
 from sgbelief.fusion.events import EvidenceEvent
-from sgbelief.fusion.rules import adjudication, consensus_cell, exclusion_increments, standing
+from sgbelief.fusion.rules import adjudication, consensus_cell, exclusion_increments, standing, targeting
 from sgbelief.graph.provenance import EntryVerdict
 
 CLASSES = ["bed", "chair", "sofa", "toilet", "tv"]
@@ -43,7 +43,8 @@ def test_adjudication_standing_and_cell_by_hand() -> None:
     assert standing(0, 0, 0) == "alone"
     assert standing(2, 3, 2) == "leading"  # ties lead
     assert standing(1, 3, 2) == "trailing"
-    assert consensus_cell("det", 2, "ambiguous", "alone") == "det|s2|ambiguous|alone"
+    assert consensus_cell("det", 2, "ambiguous", "alone", "part") == "det|s2|ambiguous|alone|part"
+    assert targeting(0.5) == "whole" and targeting(0.49) == "part"
     assert exclusion_increments(0.7) == (0.0, 0.7)
     assert [support_bucket(n) for n in (1, 2, 3, 4, 5, 6, 9, 10, 50)] == [0, 1, 2, 3, 3, 4, 4, 5, 5]
 

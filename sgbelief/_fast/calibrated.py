@@ -140,6 +140,10 @@ def apply_fused(
                 e_targets += 1
                 if mass <= tau_t and not report:
                     e_below += 1
+                    if cons is not None and label_of is not None:  # the channel still saw v
+                        lab = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
+                        if lab is not None:
+                            cons.add_label(node, t, lab)
                     continue
                 label = None
                 if label_of is None:
@@ -164,6 +168,8 @@ def apply_fused(
                 sctx, lam, kappa = cached
                 if mass <= tau_t:  # discarded; its verdict is only reported
                     e_below += 1
+                    if cons is not None and label is not None:  # the channel still saw v
+                        cons.add_label(node, t, label)
                     if y is None:
                         verdict = _NO_CLAIM
                     else:
@@ -179,9 +185,10 @@ def apply_fused(
                     if label is not None:
                         cons.add_label(node, t, label)
                     n_same, n_others, max_other = cons.standing_counts(node, pred, rivals)
-                    cell = consensus_cell(ctx, stratum, adjudication(label, y), standing(n_same, n_others, max_other))
+                    cell = consensus_cell(ctx, stratum, adjudication(label, y), standing(n_same, n_others, max_other),
+                                          "whole" if mass >= 0.5 else "part")  # rules.targeting
                     found = cons.likelihood_ratio(c, cell, pred, ctx) if y is None else None
-                    cons.add_claim(node, pred, ctx, c, cell, y is not None, eid)
+                    cons.add_claim(node, pred, ctx, c, cell, y is not None, eid, mass)
                     if found is not None:
                         lam, kappa = found
                 claim_pos = (lam > 1.0) if (cal_sign and lam != 1.0) else raw_pos

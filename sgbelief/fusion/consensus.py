@@ -76,6 +76,7 @@ class MapConsensus:
         self.cell: list[Hashable] = []
         self.decisive: list[bool] = []
         self.event: list[str] = []
+        self.mass: list[float] = []
         #: the channel's labels: (element, label) per (element, time) seen
         self.labels: dict[tuple[Any, int], str] = {}
         #: element -> {exclusive predicate: claims so far}
@@ -98,8 +99,9 @@ class MapConsensus:
         return held.get(predicate, 0), n_others, max_other
 
     def add_claim(self, node: Any, predicate: str, context: str, confidence: float, cell: Hashable,
-                  decisive: bool, event_id: str) -> None:
-        """Append one applied claim of an exclusive class."""
+                  decisive: bool, event_id: str, mass: float = 1.0) -> None:
+        """Append one applied claim of an exclusive class (``mass``: its targeting mass T(v))."""
+        self.mass.append(mass)
         self.node.append(node)
         self.pred.append(predicate)
         self.ctx.append(context)
@@ -121,7 +123,7 @@ class MapConsensus:
         keep = [i for i, e in enumerate(self.event) if e not in event_ids]
         if len(keep) == len(self.event):
             return
-        for name in ("node", "pred", "ctx", "conf", "cell", "decisive", "event"):
+        for name in ("node", "pred", "ctx", "conf", "cell", "decisive", "event", "mass"):
             col = getattr(self, name)
             setattr(self, name, [col[i] for i in keep])
         self.counts = {}
@@ -176,8 +178,9 @@ class MapConsensus:
         workers = list(self.ctx)
         labels = [f"{p}|b{b}" for p, b in zip(self.pred, bins)]
         # initial vote: a claim votes for its class by its confidence rank and for "none" by the rest
-        votes = list(ranks)
-        none_votes = [1.0 - r for r in ranks]
+        votes = [r * m for r, m in zip(ranks, self.mass)]
+        none_votes = [(1.0 - r) * m for r, m in zip(ranks, self.mass)]
+        weights = list(self.mass)  # a claim is about v with probability T(v)
         vote_classes: list[str | None] = list(self.pred)
         # the support of each element is an observation: clutter receives few claims, and without
         # it "none of these" is not identifiable (one label is always best explained by its class)
@@ -189,6 +192,7 @@ class MapConsensus:
             votes.append(0.0)
             none_votes.append(0.0)
             vote_classes.append(None)
+            weights.append(1.0)
         # the channel's labels: a label that asserts a class votes for it at initialisation, any
         # other (otherprop, a class outside the vocabulary) for "none of these"; EM then learns the
         # channel's confusion, so a vocabulary's ambiguous label ends where the claims put it
@@ -200,6 +204,7 @@ class MapConsensus:
             tasks.append(task)
             workers.append(GEOMETRIC_WORKER)
             labels.append("geo:" + label)
+            weights.append(1.0)
             if classes_of_label:
                 votes.append(1.0)
                 none_votes.append(0.0)
@@ -208,8 +213,8 @@ class MapConsensus:
                 votes.append(0.0)
                 none_votes.append(1.0)
                 vote_classes.append(None)
-        ds = self._ds.fit(tasks, workers, labels, classes=classes, n_tasks=len(task_of), votes=votes,
-                          vote_classes=vote_classes, none_votes=none_votes)
+        ds = self._ds.fit(tasks, workers, labels, classes=classes, n_tasks=len(task_of), weights=weights,
+                          votes=votes, vote_classes=vote_classes, none_votes=none_votes)
         self.ds_ = ds
         return ds.probas_, {p: i for i, p in enumerate(classes)}, task_of  # type: ignore[return-value]
 

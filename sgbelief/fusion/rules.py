@@ -11,6 +11,7 @@ verdict (compat)            :func:`verdict`
 support stratum             :func:`support_stratum`
 adjudication status         :func:`adjudication`
 standing among classes      :func:`standing`
+targeting of a claim        :func:`targeting`
 consensus cell              :func:`consensus_cell`
 calibrated LR (Eq. 2)       :func:`calibrated_log_lr` (of :mod:`sgbelief.calibration.isotonic`)
 weight w = w0 kappa T(v)    :func:`evidence_weight`
@@ -42,6 +43,7 @@ __all__ = [
     "stratified_context",
     "adjudication",
     "standing",
+    "targeting",
     "consensus_cell",
     "calibrated_log_lr",
     "evidence_weight",
@@ -148,10 +150,21 @@ def standing(n_same: int, n_others: int, max_other: int) -> str:
     return "leading" if n_same >= max_other else "trailing"
 
 
-def consensus_cell(context: str, stratum: int, status: str, rank: str) -> str:
+def targeting(mass: float) -> str:
+    """How squarely a claim lands on v: ``"whole"`` when T(v) >= 1/2 (v is the likeliest referent),
+    else ``"part"`` (the box mostly covers something else).
+
+    Eq. 3 scales a claim by T(v) but keeps its direction: a claim whose box grazes v moves v's belief
+    a little *toward* what it asserts. Whether such claims are right about v is a property of the
+    targeting scheme, measured like any other: grazing claims are calibrated in cells of their own.
+    """
+    return "whole" if mass >= 0.5 else "part"
+
+
+def consensus_cell(context: str, stratum: int, status: str, rank: str, aim: str = "whole") -> str:
     """The calibration cell of a claim the channel cannot adjudicate: (context, support stratum,
-    adjudication status, standing), as the key ``"<context>|s<stratum>|<status>|<standing>"``."""
-    return f"{context}|s{stratum}|{status}|{rank}"
+    adjudication status, standing, targeting), as ``"<context>|s<stratum>|<status>|<standing>|<aim>"``."""
+    return f"{context}|s{stratum}|{status}|{rank}|{aim}"
 
 
 def evidence_weight(w0: float, kappa: float, mass: float) -> float:

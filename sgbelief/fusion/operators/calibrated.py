@@ -36,6 +36,7 @@ from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_
     standing,
     stratified_context,
     support_stratum,
+    targeting,
     verdict,
     verification_increments,
 )
@@ -164,6 +165,8 @@ class CalibratedOperator(BaseOperator):
                 y = self._outcome(event.predicate, label)
                 if mass <= self.config.tau_t:  # discarded; its verdict is only reported
                     counts[1] += 1
+                    if consensus is not None and label is not None:  # the channel still saw v
+                        consensus.add_label(node, event.t, label)
                     context = self._context(event, self._claims_so_far(graph.provenance, node, event.predicate))
                     v = verdict(y, self._asserts(event, context))
                     outcomes.append(TargetOutcome(node, mass, v, Action.BELOW_THRESHOLD))
@@ -195,7 +198,7 @@ class CalibratedOperator(BaseOperator):
         n_strata = cfg.calibration.support_strata
         stratum = support_stratum(self._next_claim(prov, node, pred), n_strata)
         context = stratified_context(event.context, stratum, n_strata)  # the claim's Mondrian cell
-        lam, kappa = self._likelihood_ratio(event, context, stratum, node, y, label, consensus)  # Eq. 2
+        lam, kappa = self._likelihood_ratio(event, context, stratum, node, mass, y, label, consensus)  # Eq. 2
         asserts = claim_asserts(event.confidence, lam if cfg.verdict_sign == "calibrated" else None)
         v = verdict(y, asserts)
         code, c = ENTRY_VERDICT[v], event.confidence  # what each entry records of the event
@@ -232,8 +235,8 @@ class CalibratedOperator(BaseOperator):
             resolutions += queues.resolve_disagreements(prov, node, pred, event.t)
         return action, v, da, db, resolutions
 
-    def _likelihood_ratio(self, event: EvidenceEvent, context: str, stratum: int, node: Any, y: int | None,
-                          label: str | None, consensus: MapConsensus | None) -> tuple[float, float]:
+    def _likelihood_ratio(self, event: EvidenceEvent, context: str, stratum: int, node: Any, mass: float,
+                          y: int | None, label: str | None, consensus: MapConsensus | None) -> tuple[float, float]:
         """(Lambda_hat, kappa_hat) of a claim (Eq. 2): from §4.1's calibrator, or, for a claim the
         channel cannot adjudicate while the consensus is on, from the consensus calibration of its
         cell (context, stratum, adjudication, standing; docs/method.md §8). The claim then joins
@@ -242,9 +245,10 @@ class CalibratedOperator(BaseOperator):
         if consensus is None:
             return self.calibrator_.likelihood_ratio(c, context, pred)
         n_same, n_others, max_other = consensus.standing_counts(node, pred, self.vocabulary.exclusive_with(pred))  # type: ignore[union-attr]
-        cell = consensus_cell(event.context, stratum, adjudication(label, y), standing(n_same, n_others, max_other))
+        cell = consensus_cell(event.context, stratum, adjudication(label, y), standing(n_same, n_others, max_other),
+                              targeting(mass))
         found = consensus.likelihood_ratio(c, cell, pred, event.context) if y is None else None
-        consensus.add_claim(node, pred, event.context, c, cell, y is not None, event.id)
+        consensus.add_claim(node, pred, event.context, c, cell, y is not None, event.id, mass)
         return found if found is not None else self.calibrator_.likelihood_ratio(c, context, pred)
 
     def _consensus_of(self, prov: ProvenanceStore) -> MapConsensus:
