@@ -28,6 +28,7 @@ Per-event work is O(1): appending a row and two dictionary updates.
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Hashable, Mapping
 from typing import Any
 
@@ -69,14 +70,16 @@ class MapConsensus:
         self._ds = DawidSkene(n_iter=cc.n_iter, smoothing=cc.smoothing, none_class=True)
         self.calibration = ConsensusCalibration(config.target_size, config.kappa_min, config.lr_max, config.cold_start)
         # the claim table, as parallel lists (appended per claim)
+        # (strings interned, floats and flags in typed arrays: about 60 bytes a claim)
         self.node: list[Any] = []
         self.pred: list[str] = []
         self.ctx: list[str] = []
-        self.conf: list[float] = []
+        self.conf = array("d")
         self.cell: list[Hashable] = []
-        self.decisive: list[bool] = []
+        self.decisive = bytearray()
         self.event: list[str] = []
-        self.mass: list[float] = []
+        self.mass = array("d")
+        self._interned: dict[Hashable, Hashable] = {}
         #: the channel's labels: (element, label) per (element, time) seen
         self.labels: dict[tuple[Any, int], str] = {}
         #: element -> {exclusive predicate: claims so far}
@@ -101,13 +104,14 @@ class MapConsensus:
     def add_claim(self, node: Any, predicate: str, context: str, confidence: float, cell: Hashable,
                   decisive: bool, event_id: str, mass: float = 1.0) -> None:
         """Append one applied claim of an exclusive class (``mass``: its targeting mass T(v))."""
+        intern = self._interned.setdefault
         self.mass.append(mass)
         self.node.append(node)
-        self.pred.append(predicate)
-        self.ctx.append(context)
+        self.pred.append(intern(predicate, predicate))  # type: ignore[arg-type]
+        self.ctx.append(intern(context, context))  # type: ignore[arg-type]
         self.conf.append(confidence)
-        self.cell.append(cell)
-        self.decisive.append(decisive)
+        self.cell.append(intern(cell, cell))
+        self.decisive.append(1 if decisive else 0)
         self.event.append(event_id)
         held = self.counts.get(node)
         if held is None:
@@ -123,9 +127,12 @@ class MapConsensus:
         keep = [i for i, e in enumerate(self.event) if e not in event_ids]
         if len(keep) == len(self.event):
             return
-        for name in ("node", "pred", "ctx", "conf", "cell", "decisive", "event", "mass"):
+        for name in ("node", "pred", "ctx", "cell", "event"):
             col = getattr(self, name)
             setattr(self, name, [col[i] for i in keep])
+        self.conf = array("d", [self.conf[i] for i in keep])
+        self.mass = array("d", [self.mass[i] for i in keep])
+        self.decisive = bytearray(self.decisive[i] for i in keep)
         self.counts = {}
         for node, pred in zip(self.node, self.pred):
             held = self.counts.setdefault(node, {})
