@@ -10,12 +10,10 @@ import os
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from sgbelief.errors import ConfigError
-from sgbelief.eval.sim_config import Camera, load_vocabulary
-from sgbelief.resources import config_dir
+from sgbelief.eval.sim_config import Camera, load_suite_yaml, load_vocabulary
 
 __all__ = ["RealisticConfig", "RoomType", "ObjectClass", "Detection", "FalsePositives", "SegmenterRow",
            "Channels", "load_realistic_config", "PLACEMENTS", "CHANNELS"]
@@ -171,26 +169,6 @@ def load_realistic_config(name_or_path: str | os.PathLike[str] = "realistic", **
 
     Errors raise :class:`ConfigError` naming the file and the key.
     """
-    p = Path(name_or_path)
-    if not p.suffix and not p.exists():
-        p = config_dir() / "sim" / f"{name_or_path}.yaml"
-    try:
-        with open(p, encoding="utf-8") as fh:
-            raw = yaml.safe_load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"realistic suite config {str(name_or_path)!r} not found ({p})") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: bad YAML: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{p}: not UTF-8 text (byte offset {exc.start})") from None
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{p}: top level must be a mapping")
-    raw.update({k: v for k, v in overrides.items() if v is not None})
-    try:
-        cfg = RealisticConfig.model_validate(raw)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
-        raise ConfigError(f"{p}: key '{loc}': {err['msg'].removeprefix('Value error, ')}") from None
+    cfg, p = load_suite_yaml(name_or_path, RealisticConfig, "realistic suite", overrides)
     _check_vocabulary(cfg, p)
     return cfg
