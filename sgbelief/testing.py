@@ -217,7 +217,7 @@ def consensus_state(consensus: Any) -> list[Any]:
     its claim table, the channel labels, the claim counts, the refit schedule and the fitted cells."""
     fits = {repr(k): [v[0], v[1], v[2], v[3]] for k, v in sorted(consensus.calibration.fits_.items(), key=repr)}
     return float_bits([consensus.node, consensus.pred, consensus.ctx, list(consensus.conf), consensus.cell,
-                       list(consensus.decisive), list(consensus.mass),
+                       list(consensus.decisive), list(consensus.mass), [consensus._labels.names],
                        consensus.event, sorted(consensus.labels.items(), key=repr),
                        sorted(((repr(k), sorted(v.items())) for k, v in consensus.counts.items())),
                        consensus.n_at_fit, consensus.n_fits, fits])

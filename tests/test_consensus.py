@@ -71,9 +71,9 @@ def test_consensus_likelihood_ratio_shrinks_level_by_level() -> None:
     """log Lambda = l1 log L1 + (1 - l1) [l2 log L2 + (1 - l2) log L_cold], l = min(1, n / target)."""
     cal = ConsensusCalibration(target_size=4, kappa_min=0.05, lr_max=1000.0, cold_start="raw")
     # fine level: 2 claims at c = 0.6 with q = 0.25; coarse: those plus 2 at c = 0.6 with q = 0.75
-    levels = [("fine", "coarse"), ("fine", "coarse"), ("other", "coarse"), ("other", "coarse")]
-    cal.fit(levels, np.full(4, 0.6), np.array([0.25, 0.25, 0.75, 0.75]))
-    lam, kappa = cal.likelihood_ratio(0.6, ("fine", "coarse"))
+    fine, coarse = np.array([0, 0, 1, 1]), np.zeros(4, dtype=int)  # level keys per claim: cells 0 / 1, one pool
+    cal.fit([fine, coarse], np.full(4, 0.6), np.array([0.25, 0.25, 0.75, 0.75]))
+    lam, kappa = cal.likelihood_ratio(0.6, (0, 0))
     eps_fine, eps_coarse = 0.5 / 3, 0.5 / 5
     lo_coarse = math.log(0.5 / 0.5)  # pooled q = 0.5, inside [eps, 1 - eps]
     lo_fine = math.log(max(0.25, eps_fine) / (1 - max(0.25, eps_fine)))
@@ -82,7 +82,7 @@ def test_consensus_likelihood_ratio_shrinks_level_by_level() -> None:
     assert math.log(lam) == pytest.approx(expected)
     assert kappa == pytest.approx(0.5 + 0.5 * 1.0)
     assert eps_coarse < 0.5  # (the pooled fit needs no clip)
-    assert cal.likelihood_ratio(0.6, ("unknown",))[0] == pytest.approx(0.6 / 0.4)  # cold start
+    assert cal.likelihood_ratio(0.6, (7,))[0] == pytest.approx(0.6 / 0.4)  # cold start
 
 
 # ----------------------------------------------------------------------------- streams
@@ -198,9 +198,9 @@ def test_a_systematic_confusion_is_learned_with_no_channel() -> None:
         for _ in range(6):
             said = "sofa" if (k == "chair" and rng.random() < 0.35) else k
             cons.add_claim(f"v{v}", f"is_{said}", "det", rng.uniform(0.5, 0.9), "cell", False, f"e{v}")
-    probas, class_of, task_of = cons.fit_consensus()
-    chairs = [task_of[f"v{v}"] for v in range(60)]
-    assert (probas[chairs].argmax(1) == class_of["is_chair"]).mean() >= 0.9
+    probas = cons.fit_consensus()
+    chairs = [cons.task_of(f"v{v}") for v in range(60)]
+    assert (probas[chairs].argmax(1) == cons.class_of("is_chair")).mean() >= 0.9
     ds = cons.ds_
     row = ds.errors_[ds.workers_.index("det"), ds.class_index("is_chair")]
     said_sofa = sum(row[j] for j, lab in enumerate(ds.labels_) if lab.startswith("is_sofa|"))

@@ -28,7 +28,7 @@ repeated on a geometric schedule by the operator (``sgbelief.fusion.consensus``)
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.optimize import isotonic_regression
@@ -80,37 +80,39 @@ class ConsensusCalibration:
         self.kappa_min = kappa_min
         self.log_lr_max = math.log(lr_max)
         self.cold_start = cold_start
-            #: cell key -> (knots x, knots y, n, eps)
-        self.fits_: dict[Hashable, tuple[list[float], list[float], int, float]] = {}
+            #: (level, cell key) -> (knots x, knots y, n, eps)
+        self.fits_: dict[tuple[int, int], tuple[list[float], list[float], int, float]] = {}
         self.n_fit_ = 0
 
-    def fit(self, levels: Sequence[Sequence[Hashable]], c: np.ndarray, q: np.ndarray,
+    def fit(self, levels: Sequence[np.ndarray], c: np.ndarray, q: np.ndarray,
             w: np.ndarray | None = None) -> ConsensusCalibration:
-        """Refit every cell from scratch. ``levels[i]`` are claim i's cell keys, finest first (e.g.
-        (cell and predicate, cell, context)); ``c`` its confidence, ``q`` its consensus outcome."""
+        """Refit every cell from scratch. ``levels[l][i]`` is claim i's integer cell key at level l
+        (finest level first, e.g. cell and predicate, cell, context); ``c`` the confidences, ``q`` the
+        consensus outcomes, ``w`` optional weights. A fit is stored under (l, key)."""
         c = np.asarray(c, dtype=np.float64)
         q = np.asarray(q, dtype=np.float64)
         w = np.ones_like(c) if w is None else np.asarray(w, dtype=np.float64)
-        groups: dict[Hashable, list[int]] = {}
-        for i, keys in enumerate(levels):
-            for key in keys:
-                groups.setdefault(key, []).append(i)
         fits = {}
-        for key, idx in groups.items():
-            ix = np.asarray(idx, dtype=np.intp)
-            kx, ky = fit_cell(c[ix], q[ix], w[ix])
-            n = len(idx)
-            fits[key] = (kx, ky, n, probability_clip(n))
+        for lvl, keys in enumerate(levels):
+            keys = np.asarray(keys, dtype=np.int64)
+            order = np.argsort(keys, kind="stable")
+            uniq, starts = np.unique(keys[order], return_index=True)
+            ends = np.append(starts[1:], len(order))
+            for key, a, b in zip(uniq.tolist(), starts.tolist(), ends.tolist()):
+                ix = order[a:b]
+                kx, ky = fit_cell(c[ix], q[ix], w[ix])
+                fits[(lvl, key)] = (kx, ky, b - a, probability_clip(b - a))
         self.fits_ = fits
         self.n_fit_ = int(c.shape[0])
         return self
 
-    def likelihood_ratio(self, c: float, levels: Sequence[Hashable]) -> tuple[float, float]:
-        """(Lambda_hat, kappa_hat) of a claim with confidence ``c`` whose cell keys are ``levels`` (finest first)."""
+    def likelihood_ratio(self, c: float, keys: Sequence[int]) -> tuple[float, float]:
+        """(Lambda_hat, kappa_hat) of a claim with confidence ``c`` whose cell keys are ``keys`` (one per level, finest first)."""
         log_lr = cold_start_log_lr(c, self.cold_start, self.log_lr_max)
         kappa = 0.0
-        for key in reversed(levels):  # coarsest first: each finer level shrinks toward the coarser ones
-            fit = self.fits_.get(key)
+        fits = self.fits_
+        for lvl in range(len(keys) - 1, -1, -1):  # coarsest first: each finer level shrinks toward the coarser ones
+            fit = fits.get((lvl, keys[lvl]))
             if fit is None:
                 continue
             kx, ky, n, eps = fit

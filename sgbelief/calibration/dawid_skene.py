@@ -130,20 +130,33 @@ class DawidSkene:
         empty = q.sum(axis=1) <= 0
         q[empty] = 1.0
         q /= q.sum(axis=1, keepdims=True)
+        return self.fit_coded(t, wi, li, n_w, n_l, q, w)
+
+    def fit_coded(self, tasks: NDArray[np.intp], workers: NDArray[np.intp], labels: NDArray[np.intp], n_workers: int,
+                  n_labels: int, initial: NDArray[np.float64], weights: NDArray[np.float64] | None = None) -> DawidSkene:
+        """EM from integer-coded observations (task, worker, label indices) and an initial posterior
+        ``initial`` (tasks x classes, rows summing to 1): the core :meth:`fit` calls after coding its
+        table, for callers that keep their table coded (``sgbelief.fusion.consensus``). The class,
+        label and worker names are left as they are."""
+        t = np.asarray(tasks, dtype=np.intp)
+        w = np.ones(t.shape[0]) if weights is None else np.asarray(weights, dtype=np.float64)
+        q = np.asarray(initial, dtype=np.float64)
+        n_t = q.shape[0]
         # the observations as a sparse (tasks x (worker, label) cells) matrix of weights: both EM
         # steps are then one sparse product each
-        cells = sparse.csr_matrix((w, (t, wi * n_l + li)), shape=(n_t, n_w * n_l))
+        cells = sparse.csr_matrix((w, (t, np.asarray(workers, dtype=np.intp) * n_labels + labels)),
+                                  shape=(n_t, n_workers * n_labels))
         theta = pi = None
         it = 0
         for it in range(1, self.n_iter + 1):
-            theta, pi = self._m_step(q, cells, n_w, n_l)
+            theta, pi = self._m_step(q, cells, n_workers, n_labels)
             q_new = self._e_step(theta, pi, cells)
             delta = float(np.max(np.abs(q_new - q))) if n_t else 0.0
             q = q_new
             if delta <= self.tol:
                 break
         if theta is None:  # n_iter == 0: the initial vote
-            theta, pi = self._m_step(q, cells, n_w, n_l)
+            theta, pi = self._m_step(q, cells, n_workers, n_labels)
         self.priors_, self.errors_, self.probas_, self.n_iter_ = pi, theta, q, it
         return self
 
