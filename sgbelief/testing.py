@@ -205,7 +205,22 @@ def check_fast_matches_reference(
             assert list(sl.fc) == list(other.fc) and list(sl.fy) == list(other.fy), key
             # the reference engine refits scikit-learn, the fused one merges incrementally: same knots
             assert (sl.n_fit, sl.kx, sl.ky, sl.base_rate) == (other.n_fit, other.kx, other.ky, other.base_rate), key
+    cons_ref, cons_fast = getattr(ref, "_consensus", {}), getattr(fast, "_consensus", {})
+    assert len(cons_ref) == len(cons_fast), "the consensus is kept for different maps"
+    for (_, a), (_, b) in zip(cons_ref.values(), cons_fast.values()):
+        assert consensus_state(a) == consensus_state(b), "the consensus' claim tables or fits differ"
     assert sorted(g_ref.nx.nodes, key=str) == sorted(g_fast.nx.nodes, key=str)
+
+
+def consensus_state(consensus: Any) -> list[Any]:
+    """Everything observable of a :class:`~sgbelief.fusion.consensus.MapConsensus`, floats bit for bit:
+    its claim table, the channel labels, the claim counts, the refit schedule and the fitted cells."""
+    fits = {repr(k): [v[0], v[1], v[2], v[3]] for k, v in sorted(consensus.calibration.fits_.items(), key=repr)}
+    return float_bits([consensus.node, consensus.pred, consensus.ctx, list(consensus.conf), consensus.cell,
+                       list(consensus.decisive), list(consensus.mass), [consensus._labels.names],
+                       consensus.event, sorted(consensus.labels.items(), key=repr),
+                       sorted(((repr(k), sorted(v.items())) for k, v in consensus.counts.items())),
+                       consensus.n_at_fit, consensus.n_fits, fits])
 
 
 def conformance_table() -> SubsumptionTable:

@@ -35,8 +35,9 @@ def _streams():
 
 @settings(max_examples=120, deadline=None)
 @given(raw=_streams(), name=st.sampled_from(NAMES), tau_rev=st.sampled_from([0.05, 0.5]),
-       strata=st.integers(1, 4), geo=st.sampled_from(["none", "verdict", "label"]))
-def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo) -> None:
+       strata=st.integers(1, 4), geo=st.sampled_from(["none", "verdict", "label"]),
+       consensus=st.sampled_from(["none", "dawid_skene"]), every=st.integers(1, 6))
+def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo, consensus, every) -> None:
     """Maps, provenance (every entry, in order), queues, stats and calibration buffers are equal."""
     stream, t = [], 0
     for i, (targets, pred, c, ctx, dt, labels) in enumerate(raw):
@@ -47,7 +48,8 @@ def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo) -> Non
         ev = EvidenceEvent(targets, pred, c, ctx, t, f"e{i}")
         stream.append((ev, {node: labels[j % 3] for j, node in enumerate(sorted(targets))}))
     config = {"tau_rev": tau_rev, "t_prov": 25, "t_cor": 3, "t_disagree": 3, "geometric_evidence": geo,
-              "calibration": {"support_strata": strata, "target_size": 5, "min_refit": 1}}
+              "calibration": {"support_strata": strata, "target_size": 5, "min_refit": 1,
+                              "consensus": {"method": consensus, "every": every, "growth": 0.0}}}
     check_fast_matches_reference(name, stream, config, final_tick=t + 100)
 
 

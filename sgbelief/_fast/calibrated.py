@@ -22,7 +22,7 @@ from sgbelief.fusion import queues
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import Verdict
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
-from sgbelief.fusion.rules import kl_upper_bound, revision_kl_exceeds
+from sgbelief.fusion.rules import adjudication, consensus_cell, kl_upper_bound, revision_kl_exceeds, standing
 from sgbelief.graph.provenance import EntryStatus, EntryVerdict
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -42,6 +42,7 @@ _A_REFUSED = Action.REFUSED
 # the verdict codes entries record (rules.ENTRY_VERDICT, without hashing an Enum per target)
 _E_NO_CLAIM, _E_CORR = EntryVerdict.NO_CLAIM, EntryVerdict.CORROBORATES
 _E_CONTRA, _E_GEO = EntryVerdict.CONTRADICTS, EntryVerdict.GEOMETRIC
+_E_EXCL = EntryVerdict.EXCLUSION
 
 
 class FusedCalibratedEngine:
@@ -99,6 +100,9 @@ def apply_fused(
     claims_get = claims.get
     min_refit, refit_growth = cfg.calibration.min_refit, cfg.calibration.refit_growth
     calibrator = op.calibrator_
+    consensus_classes = op.consensus_classes
+    rivals_of = op.vocabulary.exclusive_with if op.excludes_rivals else None  # type: ignore[union-attr]
+    exclusive_with = op.vocabulary.exclusive_with if consensus_classes else None  # type: ignore[union-attr]
     tick = op.tick
     out: list[QueueResolution] = []
     n_events = n_targets = n_below = n_committed = n_quarantined = n_refused = 0
@@ -115,6 +119,11 @@ def apply_fused(
                     if node not in gnx:
                         raise UnknownNodeError(node, eid)
             resolutions = tick(graph, t) if t > graph.clock else []
+            cons = op._consensus_of(prov) if pred in consensus_classes else None
+            if cons is not None:
+                if cons.due():
+                    cons.refit()
+                rivals = exclusive_with(pred)  # type: ignore[misc]
             outcome_of = tables.get(pred) if tables is not None else None
             label_of = None
             if channel is not None and outcome_of is not None:
@@ -131,6 +140,10 @@ def apply_fused(
                 e_targets += 1
                 if mass <= tau_t and not report:
                     e_below += 1
+                    if cons is not None and label_of is not None:  # the channel still saw v
+                        lab = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
+                        if lab is not None:
+                            cons.add_label(node, t, lab)
                     continue
                 label = None
                 if label_of is None:
@@ -155,6 +168,8 @@ def apply_fused(
                 sctx, lam, kappa = cached
                 if mass <= tau_t:  # discarded; its verdict is only reported
                     e_below += 1
+                    if cons is not None and label is not None:  # the channel still saw v
+                        cons.add_label(node, t, label)
                     if y is None:
                         verdict = _NO_CLAIM
                     else:
@@ -166,6 +181,16 @@ def apply_fused(
                     continue
                 if n_strata > 1:
                     claims[key] = n_prev + 1
+                if cons is not None:  # the consensus' calibration for a claim the channel cannot adjudicate
+                    if label is not None:
+                        cons.add_label(node, t, label)
+                    n_same, n_others, max_other = cons.standing_counts(node, pred, rivals)
+                    cell = consensus_cell(ctx, stratum, adjudication(label, y), standing(n_same, n_others, max_other),
+                                          "whole" if mass >= 0.5 else "part")  # rules.targeting
+                    found = cons.likelihood_ratio(c, cell, pred, ctx) if y is None else None
+                    cons.add_claim(node, pred, ctx, c, cell, y is not None, eid, mass)
+                    if found is not None:
+                        lam, kappa = found
                 claim_pos = (lam > 1.0) if (cal_sign and lam != 1.0) else raw_pos
                 if y is None:
                     verdict, code = _NO_CLAIM, _E_NO_CLAIM
@@ -239,6 +264,14 @@ def apply_fused(
                         record(node, pred, eid, t, da, db, _COMMITTED, stance, code, c)
                     else:
                         commit(node, pred, eid, t, da, db, stance, code, c)
+                    if rivals_of is not None and da > 0.0:
+                        # rules.exclusion_increments, inlined: d_alpha against each rival class held at v
+                        for psi in rivals_of(pred):
+                            if pairs_get((node, psi)) is not None:
+                                if prov._timeline:
+                                    record(node, psi, eid, t, 0.0, da, _COMMITTED, -1, _E_EXCL, c)
+                                else:
+                                    commit(node, psi, eid, t, 0.0, da, -1, _E_EXCL, c)
                     e_committed += 1
                     if report:
                         outcomes.append(TargetOutcome(node, mass, verdict, _A_COMMITTED, da, db))

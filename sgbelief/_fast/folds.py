@@ -53,6 +53,7 @@ record_log = itemgetter(6)
 record_verdict = itemgetter(7)
 _COMPACTED = EntryStatus.COMPACTED
 _GEOMETRIC = EntryVerdict.GEOMETRIC
+_EXCLUSION = EntryVerdict.EXCLUSION
 _SYMBOLS = list(VERDICT_SYMBOLS.values())  # by code
 #: verdict (None included) -> column of the per-pair verdict counts in fold_journal_records
 _VERDICT_COLUMN: dict[Any, int] = {None: 0, **{v: int(v) + 1 for v in EntryVerdict}}
@@ -129,7 +130,7 @@ def _records_lambda_hats(recs: Sequence[JournalRecord], summary: FoldSummary) ->
             continue
         sym = _SYMBOLS[v]
         verdicts[sym] = verdicts.get(sym, 0) + 1
-        if v != _GEOMETRIC:
+        if v != _GEOMETRIC and v != _EXCLUSION:
             lam = claim_lambda_hat(rec[3], rec[4])
             if lam is not None:
                 lams.append(lam)
@@ -351,7 +352,8 @@ def _verdicts_by_pair(logs: list[Any], glogs: list[Any], verdict_cols: list[int]
     slot = dict(zip(glogs, range(k)))
     group = np.fromiter(map(slot.__getitem__, logs), np.intp, m)
     cols = np.asarray(verdict_cols, dtype=np.intp)  # 0: None, code + 1 otherwise
-    table = np.bincount(group * 5 + cols, minlength=5 * k).reshape(k, 5)[:, 1:].tolist()
+    n_cols = len(_SYMBOLS) + 1  # None, then one column per verdict code
+    table = np.bincount(group * n_cols + cols, minlength=n_cols * k).reshape(k, n_cols)[:, 1:].tolist()
     verdicts = [{_SYMBOLS[c]: n for c, n in enumerate(row) if n} for row in table]
     finite = np.isfinite(da) & np.isfinite(db)
     claim = (cols >= 1) & (cols <= 3) & (db > 0.0) & (da >= 0.0) & finite  # claim_lambda_hat is not None

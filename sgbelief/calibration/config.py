@@ -11,7 +11,24 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["CalibrationConfig"]
+__all__ = ["CalibrationConfig", "ConsensusConfig"]
+
+
+class ConsensusConfig(BaseModel):
+    """Calibration from agreement where the geometric channel is silent (docs/method.md §8)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    method: Literal["none", "dawid_skene"] = Field(
+        "dawid_skene",
+        description="claims the channel cannot adjudicate are calibrated on the map-wide Dawid-Skene consensus "
+        "(dawid_skene) or on the adjudicated claims' calibration like every other claim (none, the paper)",
+    )
+    every: int = Field(100, ge=1, description="claims between two refits of the consensus, at least")
+    growth: float = Field(0.25, ge=0.0, description="... and at least this fraction of the claims held (O(log n) refits)")
+    bins: int = Field(4, ge=1, description="confidence bins per context (by rank) for the Dawid-Skene workers")
+    smoothing: float = Field(0.5, ge=0.0, description="Dirichlet pseudo-count of the Dawid-Skene M-step")
+    n_iter: int = Field(50, ge=1, description="EM iterations at most per refit")
 
 
 class CalibrationConfig(BaseModel):
@@ -47,4 +64,8 @@ class CalibrationConfig(BaseModel):
         262_144,
         ge=16,
         description="most recent verification outcomes kept per Mondrian slice (sliding window); null keeps all",
+    )
+    consensus: ConsensusConfig = Field(
+        ConsensusConfig(),
+        description="calibration of the claims the geometric channel cannot adjudicate (map-wide agreement)",
     )

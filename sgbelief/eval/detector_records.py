@@ -44,6 +44,8 @@ COCO_TO_PREDICATE: dict[int, tuple[str, ...]] = {
     84: ("is_bookshelf",),  # book (COCO has no bookshelf class)
     70: ("is_toilet",),  # toilet
     81: ("is_sink",),  # sink
+    72: ("is_tv",),  # tv (COCO's tv class also covers monitors)
+    82: ("is_refrigerator",),  # refrigerator
 }
 
 

@@ -34,7 +34,11 @@ DEV_SEEDS = (0, 1, 2)
 HELD_OUT_SEEDS = (100, 101, 102, 103, 104)
 BASELINES = ("overwrite", "majority", "naive_bayes", "refined")
 #: the predicate whose commit precision the paper reports (0.997 with the panoptic oracle)
-PRECISION_PREDICATE = {"outdoor": "is_car", "indoor": "is_chair"}
+PRECISION_PREDICATE = {"outdoor": "is_car", "indoor": "is_chair", "realistic": "is_chair"}
+#: the realistic suite's axes (sgbelief.eval.realistic): profile = confidence transform, source = detector
+REALISTIC_PROFILES = ("c", "c3")
+REALISTIC_SOURCES = ("rfcn", "ssd")
+REALISTIC_CHANNELS = ("mesh", "segmenter", "none")
 
 
 @dataclass(frozen=True, order=True)
@@ -53,7 +57,13 @@ class GridCell:
 
 def grid_cells(suites: Sequence[str] = ("outdoor", "indoor"), profiles: Sequence[str] = PROFILES,
                sources: Sequence[str] = tuple(SOURCES), channels: Sequence[str] = CHANNELS) -> list[GridCell]:
-    return [GridCell(*c) for c in itertools.product(suites, profiles, sources, channels)]
+    """The cells of ``suites``; the realistic suite has its own axes (REALISTIC_*)."""
+    sim = [s for s in suites if s != "realistic"]
+    cells = [GridCell(*c) for c in itertools.product(sim, profiles, sources, channels)]
+    if "realistic" in suites:
+        cells += [GridCell("realistic", *c) for c in itertools.product(REALISTIC_PROFILES, REALISTIC_SOURCES,
+                                                                        REALISTIC_CHANNELS)]
+    return cells
 
 
 @dataclass(frozen=True)
@@ -70,6 +80,11 @@ class _Job:
 
 def _run_job(job: _Job) -> list[dict[str, Any]]:
     """Simulate one (suite, seed, source) and score every operator on each (profile, channel) view."""
+    if job.suite == "realistic":
+        from sgbelief.eval.realistic_report import realistic_grid_rows
+
+        return realistic_grid_rows(job.seed, job.profiles, (job.source,), job.channels, job.operators, job.config,
+                                   job.scale)
     from sgbelief.eval.benchmark import SUITES, score_operators
     from sgbelief.eval.sim_config import load_sim_config
     from sgbelief.eval.simulate import simulate

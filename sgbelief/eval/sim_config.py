@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from sgbelief.errors import ConfigError
 from sgbelief.resources import config_dir
+
+_M = TypeVar("_M", bound=BaseModel)
 
 __all__ = [
     "SimConfig",
@@ -255,11 +257,10 @@ def _check_labels(cfg: SimConfig, vocab: dict[str, Any]) -> None:
             raise ConfigError(f"predicate {p!r} is not defined by vocabulary {cfg.vocabulary!r}")
 
 
-def load_sim_config(name_or_path: str | os.PathLike[str], **overrides: Any) -> SimConfig:
-    """Load ``sgbelief/configs/sim/<name>.yaml`` (or a path); ``overrides`` replace top-level keys.
-
-    Errors raise :class:`ConfigError` naming the offending key.
-    """
+def load_suite_yaml(name_or_path: str | os.PathLike[str], model: type[_M], what: str,
+                    overrides: dict[str, Any]) -> tuple[_M, Path]:
+    """A suite config validated by ``model``: ``sgbelief/configs/sim/<name>.yaml`` or a path, top-level
+    keys replaced by ``overrides``; errors raise :class:`ConfigError` naming the file and the key."""
     p = Path(name_or_path)
     if not p.suffix and not p.exists():
         p = config_dir() / "sim" / f"{name_or_path}.yaml"
@@ -267,7 +268,7 @@ def load_sim_config(name_or_path: str | os.PathLike[str], **overrides: Any) -> S
         with open(p, encoding="utf-8") as fh:
             raw = yaml.safe_load(fh)
     except FileNotFoundError:
-        raise ConfigError(f"simulation config {str(name_or_path)!r} not found ({p})") from None
+        raise ConfigError(f"{what} config {str(name_or_path)!r} not found ({p})") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: bad YAML: {exc}") from None
     except UnicodeDecodeError as exc:
@@ -276,10 +277,18 @@ def load_sim_config(name_or_path: str | os.PathLike[str], **overrides: Any) -> S
         raise ConfigError(f"{p}: top level must be a mapping")
     raw.update({k: v for k, v in overrides.items() if v is not None})
     try:
-        cfg = SimConfig.model_validate(raw)
+        return model.model_validate(raw), p
     except ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
         raise ConfigError(f"{p}: key '{loc}': {err['msg'].removeprefix('Value error, ')}") from None
+
+
+def load_sim_config(name_or_path: str | os.PathLike[str], **overrides: Any) -> SimConfig:
+    """Load ``sgbelief/configs/sim/<name>.yaml`` (or a path); ``overrides`` replace top-level keys.
+
+    Errors raise :class:`ConfigError` naming the offending key.
+    """
+    cfg, _ = load_suite_yaml(name_or_path, SimConfig, "simulation", overrides)
     _check_labels(cfg, load_vocabulary(cfg.vocabulary))
     return cfg

@@ -136,6 +136,7 @@ class SubsumptionTable:
             for alias in [*spec.aliases, *spec.positive]:
                 self._alias.setdefault(normalise_class_name(alias), pred)
             self._alias.setdefault(normalise_class_name(pred.removeprefix("is_")), pred)
+        self._exclusive: dict[str, tuple[str, ...]] | None = None  # computed on first use
         #: label -> the predicates whose positive set holds it (what the label itself asserts)
         self._asserted: dict[str, tuple[str, ...]] = {}
         for pred, table in self._outcomes.items():
@@ -249,6 +250,35 @@ class SubsumptionTable:
     def asserted_tables(self) -> dict[str, tuple[str, ...]]:
         """label -> :meth:`asserted_by` (read-only use in hot loops)."""
         return self._asserted
+
+    def exclusive_with(self, predicate: str) -> tuple[str, ...]:
+        """The predicates that cannot hold together with ``predicate`` on one element.
+
+        phi and psi exclude each other when every label asserting one of them denies the other:
+        pos(phi) ⊆ neg(psi) or pos(psi) ⊆ neg(phi) (both positive sets non-empty). Whatever bears
+        a label of pos(phi) is then, by the table, not a psi. Concrete classes of an open vocabulary
+        exclude each other; ``is_car`` and ``is_stationary`` do not. In table order.
+        """
+        ex = self._exclusive
+        if ex is None:
+            ex = self._exclusive = self._exclusion_sets()
+        return ex.get(predicate, ())
+
+    def exclusive_predicates(self) -> frozenset[str]:
+        """The predicates that exclude at least one other (:meth:`exclusive_with`): the classes."""
+        return frozenset(p for p in self.specs if self.exclusive_with(p))
+
+    def _exclusion_sets(self) -> dict[str, tuple[str, ...]]:
+        pos = {p: frozenset(spec.positive) for p, spec in self.specs.items()}
+        neg = {p: frozenset(spec.negative) for p, spec in self.specs.items()}
+        out: dict[str, set[str]] = {p: set() for p in self.specs}
+        preds = list(self.specs)
+        for i, p in enumerate(preds):
+            for q in preds[i + 1:]:
+                if pos[p] and pos[q] and (pos[p] <= neg[q] or pos[q] <= neg[p]):
+                    out[p].add(q)
+                    out[q].add(p)
+        return {p: tuple(q for q in preds if q in out[p]) for p in preds}
 
     def predicate_for_class(self, class_name: str) -> str | None:
         """The predicate a detector class name asserts (via aliases / positive labels), or None."""

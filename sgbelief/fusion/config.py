@@ -72,6 +72,12 @@ class OperatorConfig(_Frozen):
         "ConceptGraphs backend's default, docs/method.md §3), or is used only to refuse and calibrate "
         "(none, the paper)",
     )
+    exclusive_evidence: Literal["none", "rivals"] = Field(
+        "rivals",
+        description="cal / comod: a committed claim of a class is also evidence against the classes that exclude it "
+        "at the same element (rivals: the Dirichlet coupling of docs/method.md §8) or only about its own predicate (none, "
+        "the paper)",
+    )
     verdict_sign: Literal["calibrated", "raw"] = Field(
         "calibrated",
         description="sign of a claim for the verdict: calibrated Lambda_hat > 1 (default, invariant under "
@@ -135,14 +141,16 @@ class OperatorConfig(_Frozen):
 #: the settings that make an operator config the paper's own (§4, Table 1): reported beside the default
 PAPER_SETTINGS: dict[str, Any] = {
     "geometric_evidence": "none",
+    "exclusive_evidence": "none",
     "verdict_sign": "raw",
-    "calibration": {"lr_reference": "slice", "kappa_pooling": "slice", "support_strata": 1},
+    "calibration": {"lr_reference": "slice", "kappa_pooling": "slice", "support_strata": 1,
+                    "consensus": {"method": "none"}},
 }
 
 
 def paper_variant(config: OperatorConfig) -> OperatorConfig:
     """``config`` with the method options of :data:`PAPER_SETTINGS` (everything else unchanged)."""
-    cal = config.calibration.model_copy(update=PAPER_SETTINGS["calibration"])
+    cal = CalibrationConfig.model_validate({**config.calibration.model_dump(), **PAPER_SETTINGS["calibration"]})
     top = {k: v for k, v in PAPER_SETTINGS.items() if k != "calibration"}
     return config.model_copy(update={**top, "calibration": cal})
 

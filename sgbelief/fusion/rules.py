@@ -9,11 +9,16 @@ step                        function
 sign of the claim           :func:`claim_asserts`
 verdict (compat)            :func:`verdict`
 support stratum             :func:`support_stratum`
+adjudication status         :func:`adjudication`
+standing among classes      :func:`standing`
+targeting of a claim        :func:`targeting`
+consensus cell              :func:`consensus_cell`
 calibrated LR (Eq. 2)       :func:`calibrated_log_lr` (of :mod:`sgbelief.calibration.isotonic`)
 weight w = w0 kappa T(v)    :func:`evidence_weight`
 increments (Eq. 3)          :func:`claim_increments`
 Eq. 3 inverted (Λ̂, w)      :func:`claim_lambda_hat`, :func:`claim_weight`
 geometric observation       :func:`verification_increments`
+a rival class's claim       :func:`exclusion_increments`
 label's own predicates      :func:`label_observations`
 revision test (KL > tau)    :func:`revision_kl_exceeds` (bound: :func:`kl_upper_bound`)
 ==========================  ==========================================================
@@ -36,12 +41,17 @@ __all__ = [
     "verdict",
     "support_stratum",
     "stratified_context",
+    "adjudication",
+    "standing",
+    "targeting",
+    "consensus_cell",
     "calibrated_log_lr",
     "evidence_weight",
     "claim_increments",
     "claim_lambda_hat",
     "claim_weight",
     "verification_increments",
+    "exclusion_increments",
     "label_observations",
     "kl_upper_bound",
     "revision_kl_exceeds",
@@ -111,6 +121,52 @@ def stratified_context(context: str, stratum: int, n_strata: int) -> str:
     return context if n_strata <= 1 else f"{context}|s{stratum}"
 
 
+def adjudication(label: str | None, outcome: int | None) -> str:
+    """Whether the geometric channel could judge a claim at (v, t): ``"decisive"`` (its label gives
+    an outcome y for phi), ``"ambiguous"`` (it labels v, but the label is in neither of phi's sets:
+    ``otherprop``, ``shelves`` for a bookshelf) or ``"unseen"`` (no label at (v, t), or no channel).
+
+    Claims of the three kinds are not exchangeable: the elements a channel labels decisively are
+    the well-observed ones, and claims on clutter nobody can judge are right less often. Each kind
+    is therefore calibrated in a cell of its own (docs/method.md §8).
+    """
+    if outcome is not None:
+        return "decisive"
+    return "unseen" if label is None else "ambiguous"
+
+
+def standing(n_same: int, n_others: int, max_other: int) -> str:
+    """A claim's standing among the exclusive classes already claimed at its element.
+
+    ``n_same``: earlier claims of phi at v; ``n_others``: earlier claims at v of predicates that
+    exclude phi; ``max_other``: the most claims any one of them received. ``"alone"`` (no rival
+    class claimed), ``"leading"`` (phi has at least as many claims as any rival) or ``"trailing"``.
+    An element claimed once as toilet, twice as bed and once as tv is probably none of them: its
+    claims fall in the leading and trailing cells, which are calibrated on what such elements turn
+    out to be.
+    """
+    if n_others == 0:
+        return "alone"
+    return "leading" if n_same >= max_other else "trailing"
+
+
+def targeting(mass: float) -> str:
+    """How squarely a claim lands on v: ``"whole"`` when T(v) >= 1/2 (v is the likeliest referent),
+    else ``"part"`` (the box mostly covers something else).
+
+    Eq. 3 scales a claim by T(v) but keeps its direction: a claim whose box grazes v moves v's belief
+    a little *toward* what it asserts. Whether such claims are right about v is a property of the
+    targeting scheme, measured like any other: grazing claims are calibrated in cells of their own.
+    """
+    return "whole" if mass >= 0.5 else "part"
+
+
+def consensus_cell(context: str, stratum: int, status: str, rank: str, aim: str = "whole") -> str:
+    """The calibration cell of a claim the channel cannot adjudicate: (context, support stratum,
+    adjudication status, standing, targeting), as ``"<context>|s<stratum>|<status>|<standing>|<aim>"``."""
+    return f"{context}|s{stratum}|{status}|{rank}|{aim}"
+
+
 def evidence_weight(w0: float, kappa: float, mass: float) -> float:
     """Per-target evidence weight: w T(v) with w = w0 kappa_hat (Eq. 3 and its shrinkage)."""
     return w0 * kappa * mass
@@ -137,6 +193,27 @@ def verification_increments(outcome: int, weight: float) -> tuple[float, float]:
         (d_alpha, d_beta) = (w T(v), 0) if outcome == 1 else (0, w T(v))
     """
     return (weight, 0.0) if outcome == 1 else (0.0, weight)
+
+
+def exclusion_increments(d_alpha: float) -> tuple[float, float]:
+    """A claim of phi as evidence about a class psi that excludes phi (``exclusive_evidence: rivals``).
+
+    The exclusive classes of an element (``SubsumptionTable.exclusive_with``) and "none of them"
+    are the categories of one categorical variable; a Dirichlet belief over it has, for each class
+    psi, the marginal Beta(alpha_psi, sum of the other categories' alphas): the per-predicate Beta.
+    A claim of phi with Eq. 3 increments (d_alpha, d_beta) puts d_alpha on the category phi and
+    d_beta on "not phi", spread over the others without saying which. Seen from psi, mass on phi is
+    mass on "not psi"; mass on "not phi" says nothing of psi against the rest. So at (v, psi)::
+
+        (d_alpha_psi, d_beta_psi) = (0, d_alpha)
+
+    An element claimed once as toilet, twice as bed and once as tv then holds for is_bed its own two
+    claims against the toilet's and the tv's: it stays below the commit threshold, where two
+    independent per-predicate Betas would commit it. The entry is written at rival pairs the log
+    already holds, under the claim's event id (retracting the claim retracts it), and only for a
+    claim committed at its own pair (a refused or quarantined claim moves nothing, here either).
+    """
+    return 0.0, d_alpha
 
 
 def label_observations(asserted: tuple[str, ...], claimed: str, node: object, t: int,

@@ -54,16 +54,18 @@ class EntryVerdict(IntEnum):
     CORROBORATES = 1  #: ⊤: the geometric label agrees with the claim's sign
     CONTRADICTS = 2  #: ⊥: the geometric label contradicts it
     GEOMETRIC = 3  #: not a claim: the decisive geometric label itself as one observation of y
+    EXCLUSION = 4  #: not a claim of this predicate: a claim of an exclusive rival class, as evidence against it
 
     @property
     def symbol(self) -> str:
-        """⊤ / ⊥ / ∅, or "geometric" for a geometric observation (the keys of the fold summaries)."""
+        """⊤ / ⊥ / ∅, "geometric" for a geometric observation, "exclusion" for a rival class's
+        claim (the keys of the fold summaries)."""
         return VERDICT_SYMBOLS[self]
 
     @property
     def is_claim(self) -> bool:
         """Whether the entry holds a claim's increments (Eq. 3), from which Lambda-hat follows."""
-        return self is not EntryVerdict.GEOMETRIC
+        return self is not EntryVerdict.GEOMETRIC and self is not EntryVerdict.EXCLUSION
 
 
 #: the symbol of each verdict code (the keys of :attr:`FoldSummary.verdicts`)
@@ -72,6 +74,7 @@ VERDICT_SYMBOLS: dict[EntryVerdict, str] = {
     EntryVerdict.CORROBORATES: "⊤",
     EntryVerdict.CONTRADICTS: "⊥",
     EntryVerdict.GEOMETRIC: "geometric",
+    EntryVerdict.EXCLUSION: "exclusion",
 }
 #: verdict code -> member (for loaders: ``VERDICT_BY_CODE[code]``)
 VERDICT_BY_CODE: tuple[EntryVerdict, ...] = tuple(EntryVerdict)
@@ -105,10 +108,11 @@ def claim_weight(d_alpha: float, d_beta: float) -> float:
 
 
 def entry_lambda_hat(entry: ProvenanceEntry) -> float | None:
-    """Lambda-hat of an entry that records a claim (a verdict other than "geometric"); None for
-    a geometric observation, an entry without a recorded verdict or impossible increments."""
+    """Lambda-hat of an entry that records a claim (a verdict other than "geometric" and
+    "exclusion"); None for an observation, an entry without a recorded verdict or impossible
+    increments."""
     v = entry.verdict
-    if v is None or v == _GEOMETRIC:
+    if v is None or not v.is_claim:
         return None
     return claim_lambda_hat(entry.d_alpha, entry.d_beta)
 

@@ -56,6 +56,7 @@ NOT_RECORDED_OLD = (
 _STANCE = {1: "supports", -1: "denies", 0: "neutral"}
 _BOTTOM = VERDICT_SYMBOLS[EntryVerdict.CONTRADICTS]
 _GEOMETRIC = VERDICT_SYMBOLS[EntryVerdict.GEOMETRIC]
+_EXCLUSION = VERDICT_SYMBOLS[EntryVerdict.EXCLUSION]
 #: the verdicts of a claim (every verdict but the geometric observation)
 CLAIM_VERDICTS = tuple(sym for v, sym in VERDICT_SYMBOLS.items() if v.is_claim)
 
@@ -151,7 +152,7 @@ def _event(entry: ProvenanceEntry) -> StoryEvent:
     da, db = entry.d_alpha, entry.d_beta
     if v is not None:
         symbol = VERDICT_SYMBOLS[v]
-        lam = claim_lambda_hat(da, db) if v != EntryVerdict.GEOMETRIC else None
+        lam = claim_lambda_hat(da, db) if v is None or v.is_claim else None
         weight: float | None = claim_weight(da, db)
     elif status in REFUSAL_STATUSES:  # a refused claim: its increments are a claim's (Eq. 3)
         symbol, lam, weight = _BOTTOM, claim_lambda_hat(da, db), claim_weight(da, db)
@@ -224,6 +225,8 @@ def _sentence(predicate: str, p: float, tau: float, counts: dict[str, int], pend
         why += f"; {max(claims, n_claims)} claims, mean Λ̂ {mean_lam:.2f}"
         if verdicts.get(_GEOMETRIC):
             why += f", and {verdicts[_GEOMETRIC]} geometric observations"
+        if verdicts.get(_EXCLUSION):
+            why += f", and {verdicts[_EXCLUSION]} claims of exclusive classes against it"
     if pending:
         why += f"; {pending} still pending in a queue can change it"
     if p > tau:

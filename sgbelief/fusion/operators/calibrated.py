@@ -20,17 +20,23 @@ from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, paper_variant, resolve_config
 from sgbelief.fusion.operators.base import BaseOperator, OperatorEngine
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
+from sgbelief.fusion.consensus import MapConsensus
 from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_exceeds: re-exported)
     ENTRY_VERDICT,
+    adjudication,
     claim_asserts,
     claim_increments,
+    consensus_cell,
     evidence_weight,
+    exclusion_increments,
     kl_upper_bound,
     label_observations,
     revision_kl_exceeds,
     stance_of,
+    standing,
     stratified_context,
     support_stratum,
+    targeting,
     verdict,
     verification_increments,
 )
@@ -93,6 +99,12 @@ class CalibratedOperator(BaseOperator):
         self._claims: dict[int, tuple[ProvenanceStore, dict[tuple[Any, str], int]]] = {}
         #: the time of the last label observation per (v, psi), per provenance store (once per frame)
         self._label_seen: dict[int, tuple[ProvenanceStore, dict[tuple[Any, str], int]]] = {}
+        #: the map-wide consensus (claim table, labels, its calibration) per provenance store
+        self._consensus: dict[int, tuple[ProvenanceStore, MapConsensus]] = {}
+        #: the exclusive classes of the vocabulary (the consensus' latent classes), when it is on
+        self.consensus_classes: frozenset[str] = frozenset()
+        if cfg.calibration.consensus.method != "none" and self.vocabulary is not None:
+            self.consensus_classes = self.vocabulary.exclusive_predicates()
 
     @classmethod
     def _settings(cls, config: OperatorConfig) -> OperatorConfig:
@@ -109,6 +121,11 @@ class CalibratedOperator(BaseOperator):
     def observes_label(self) -> bool:
         """A decisive geometric label also observes the predicates it asserts (``geometric_evidence: label``)."""
         return self.check_compatibility and self.config.geometric_evidence == "label"
+
+    @property
+    def excludes_rivals(self) -> bool:
+        """A committed claim also counts against the classes that exclude it (``exclusive_evidence: rivals``)."""
+        return self.config.exclusive_evidence == "rivals" and self.vocabulary is not None
 
     @property
     def claims_property2(self) -> bool:
@@ -136,6 +153,9 @@ class CalibratedOperator(BaseOperator):
         for event, channel in items:
             self._check(graph, event)
             resolutions = self.tick(graph, event.t) if event.t > graph.clock else []
+            consensus = self._consensus_of(graph.provenance) if event.predicate in self.consensus_classes else None
+            if consensus is not None and consensus.due():  # batched: never per event over the map
+                consensus.refit()
             outcomes: list[TargetOutcome] = []
             verified: list[tuple[int, str]] = []  # (y, calibration context) for step 5
             counts = [0, 0, 0, 0, 0]  # targets, below tau_T, committed, quarantined, refused
@@ -145,6 +165,8 @@ class CalibratedOperator(BaseOperator):
                 y = self._outcome(event.predicate, label)
                 if mass <= self.config.tau_t:  # discarded; its verdict is only reported
                     counts[1] += 1
+                    if consensus is not None and label is not None:  # the channel still saw v
+                        consensus.add_label(node, event.t, label)
                     context = self._context(event, self._claims_so_far(graph.provenance, node, event.predicate))
                     v = verdict(y, self._asserts(event, context))
                     outcomes.append(TargetOutcome(node, mass, v, Action.BELOW_THRESHOLD))
@@ -152,7 +174,9 @@ class CalibratedOperator(BaseOperator):
                 graph.ensure_node(node)
                 if label is not None and self.observes_label:  # pairs other than (v, phi), before the claim's entries
                     self._observe_label(graph, event, node, mass, label)
-                action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified)
+                if consensus is not None and label is not None:
+                    consensus.add_label(node, event.t, label)
+                action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified, label, consensus)
                 resolutions += res
                 counts[{Action.COMMITTED: 2, Action.QUARANTINED: 3, Action.REFUSED: 4}[action]] += 1
                 outcomes.append(TargetOutcome(node, mass, v, action, da, db))
@@ -167,12 +191,14 @@ class CalibratedOperator(BaseOperator):
 
     def _apply_target(
         self, graph: SceneGraph, event: EvidenceEvent, node: Any, mass: float, y: int | None,
-        verified: list[tuple[int, str]],
+        verified: list[tuple[int, str]], label: str | None = None, consensus: MapConsensus | None = None,
     ) -> tuple[Action, Verdict, float, float, list[QueueResolution]]:
         """Alg. 1 lines 4-19 for one target with T(v) > tau_T: (action, verdict, d_alpha, d_beta, resolutions)."""
         cfg, prov, pred = self.config, graph.provenance, event.predicate
-        context = self._context(event, self._next_claim(prov, node, pred))  # the claim's Mondrian cell
-        lam, kappa = self.calibrator_.likelihood_ratio(event.confidence, context, pred)  # Eq. 2
+        n_strata = cfg.calibration.support_strata
+        stratum = support_stratum(self._next_claim(prov, node, pred), n_strata)
+        context = stratified_context(event.context, stratum, n_strata)  # the claim's Mondrian cell
+        lam, kappa = self._likelihood_ratio(event, context, stratum, node, mass, y, label, consensus)  # Eq. 2
         asserts = claim_asserts(event.confidence, lam if cfg.verdict_sign == "calibrated" else None)
         v = verdict(y, asserts)
         code, c = ENTRY_VERDICT[v], event.confidence  # what each entry records of the event
@@ -203,9 +229,35 @@ class CalibratedOperator(BaseOperator):
         else:
             prov.record(node, pred, event.id, event.t, da, db, EntryStatus.COMMITTED, stance, code, c)
             action = Action.COMMITTED
+            if self.excludes_rivals and da > 0.0:
+                self._exclude_rivals(prov, node, pred, event, da)
         if self.check_compatibility and v is _CORR:  # later agreement resolves pending ⊥ at (v, phi)
             resolutions += queues.resolve_disagreements(prov, node, pred, event.t)
         return action, v, da, db, resolutions
+
+    def _likelihood_ratio(self, event: EvidenceEvent, context: str, stratum: int, node: Any, mass: float,
+                          y: int | None, label: str | None, consensus: MapConsensus | None) -> tuple[float, float]:
+        """(Lambda_hat, kappa_hat) of a claim (Eq. 2): from §4.1's calibrator, or, for a claim the
+        channel cannot adjudicate while the consensus is on, from the consensus calibration of its
+        cell (context, stratum, adjudication, standing; docs/method.md §8). The claim then joins
+        the consensus' table."""
+        c, pred = event.confidence, event.predicate
+        if consensus is None:
+            return self.calibrator_.likelihood_ratio(c, context, pred)
+        n_same, n_others, max_other = consensus.standing_counts(node, pred, self.vocabulary.exclusive_with(pred))  # type: ignore[union-attr]
+        cell = consensus_cell(event.context, stratum, adjudication(label, y), standing(n_same, n_others, max_other),
+                              targeting(mass))
+        found = consensus.likelihood_ratio(c, cell, pred, event.context) if y is None else None
+        consensus.add_claim(node, pred, event.context, c, cell, y is not None, event.id, mass)
+        return found if found is not None else self.calibrator_.likelihood_ratio(c, context, pred)
+
+    def _consensus_of(self, prov: ProvenanceStore) -> MapConsensus:
+        """The consensus of one provenance store (created on first use)."""
+        held = self._consensus.get(id(prov))
+        if held is None or held[0] is not prov:
+            held = self._consensus[id(prov)] = (prov, MapConsensus(self.config.calibration, self.consensus_classes,
+                                                                      self.vocabulary.asserted_tables()))  # type: ignore[union-attr]
+        return held[1]
 
     def _context(self, event: EvidenceEvent, n_prior_claims: int) -> str:
         """The calibration context of a claim with ``n_prior_claims`` earlier claims at its pair."""
@@ -242,6 +294,15 @@ class CalibratedOperator(BaseOperator):
             prov.record(node, psi, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1, EntryVerdict.GEOMETRIC,
                         event.confidence)
 
+    def _exclude_rivals(self, prov: ProvenanceStore, node: Any, pred: str, event: EvidenceEvent, d_alpha: float) -> None:
+        """``exclusive_evidence: rivals``: the committed claim's d_alpha is evidence against each class
+        that excludes ``pred`` and already has a belief at v (:func:`~sgbelief.fusion.rules.exclusion_increments`)."""
+        ea, eb = exclusion_increments(d_alpha)
+        for psi in self.vocabulary.exclusive_with(pred):  # type: ignore[union-attr]
+            if (node, psi) in prov:
+                prov.record(node, psi, event.id, event.t, ea, eb, EntryStatus.COMMITTED, -1, EntryVerdict.EXCLUSION,
+                            event.confidence)
+
     def _feed_calibration(self, event: EvidenceEvent, verified: list[tuple[int, str]]) -> None:
         """Alg. 1 line 21: the event's verification outcomes join the buffer after all its targets."""
         for y, context in verified:
@@ -263,8 +324,8 @@ class CalibratedOperator(BaseOperator):
         for entry in prov.entries(node, predicate):
             if entry.status is EntryStatus.COMPACTED:
                 n += entry.n_folded
-            elif entry.verdict is EntryVerdict.GEOMETRIC:
-                continue  # an observation, not a claim (a claim's own entry carries the same id)
+            elif entry.verdict is not None and not entry.verdict.is_claim:
+                continue  # an observation (geometric, or a rival's claim), not a claim of this pair
             elif entry.event_id not in ids:
                 ids.add(entry.event_id)
                 n += 1
@@ -335,6 +396,9 @@ class CalibratedOperator(BaseOperator):
         toward their pairs' support."""
         retracted = super().retract(graph, event_id)
         self._claims.pop(id(graph.provenance), None)  # recounted from the logs on next use
+        held = self._consensus.get(id(graph.provenance))
+        if held is not None and held[0] is graph.provenance:
+            held[1].drop_events(set(retracted))
         self._label_seen.pop(id(graph.provenance), None)
         return retracted
 

@@ -1,0 +1,188 @@
+"""Dawid–Skene: a detector's reliability learned from agreement between its claims, without ground truth.
+
+Dawid & Skene (1979), *Maximum likelihood estimation of observer error-rates using the EM
+algorithm*. Each task (a map element v) has a latent class z_v; each observation o of v is a label
+l_o given by a worker w_o (here: a claim's detector context and confidence bin, or the geometric
+channel), drawn from the worker's confusion row::
+
+    P(z_v = z)                      = pi_z
+    P(l_o = l | z_v = z, w_o = w)   = theta_w[z, l]
+    P(z_v = z | observations of v)  ∝ pi_z  prod_o theta_{w_o}[z, l_o]          (E-step)
+
+and EM alternates the posterior q_v(z) above with the closed-form maximisation
+pi_z = mean_v q_v(z), theta_w[z, l] ∝ lambda + sum_{o: w_o = w, l_o = l} q_{v_o}(z) (M-step,
+``smoothing`` lambda a symmetric Dirichlet pseudo-count; 0 is plain maximum likelihood).
+
+Two differences from the textbook model, both optional:
+
+* The latent classes need not be the labels. A worker's label space is the union of every label
+  seen (claims name predicates, the geometric channel names its own classes such as
+  ``otherprop``), and ``none_class=True`` adds a latent class "none of these" for elements that are
+  none of the claimed classes: clutter on which stray detections land. Its confusion row is learned
+  like any other: claims on such elements are few, scattered over classes, and low in confidence.
+* ``weights``: an observation may count fractionally (a claim's targeting mass T(v)).
+
+The estimator has crowd-kit's shape (``fit`` on a long table, fitted state with a trailing
+underscore: ``priors_``, ``errors_``, ``probas_``); with ``none_class=False``, ``smoothing=0``
+and majority-vote initialisation it is crowd-kit's ``DawidSkene`` (``tests/test_dawid_skene.py``
+checks that on a seeded stream).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import sparse
+
+__all__ = ["DawidSkene", "NONE_CLASS"]
+
+#: the name of the latent class "none of the claimed classes"
+NONE_CLASS = "<none>"
+
+_EPS = 1e-12
+
+
+@dataclass
+class DawidSkene:
+    """EM for the Dawid–Skene latent class model (see the module docstring for the equations).
+
+    Parameters
+    ----------
+    n_iter : int
+        Maximum number of EM iterations.
+    tol : float
+        Stop when no posterior q_v(z) moves by more than ``tol`` in one iteration.
+    smoothing : float
+        Symmetric Dirichlet pseudo-count added to every confusion cell and prior in the M-step.
+    none_class : bool
+        Add the latent class :data:`NONE_CLASS` ("none of these").
+    none_prior_votes : float
+        Initialisation only: the "none" class starts with this many votes on every element (the
+        claims' weights vote for their classes), so an element with one weak claim starts mostly
+        "none" and one with many agreeing claims starts mostly that class.
+    """
+
+    n_iter: int = 50
+    tol: float = 1e-6
+    smoothing: float = 0.5
+    none_class: bool = True
+    none_prior_votes: float = 1.0
+
+    # fitted state
+    classes_: list[str] | None = None
+    labels_: list[str] | None = None
+    workers_: list[str] | None = None
+    priors_: NDArray[np.float64] | None = None
+    errors_: NDArray[np.float64] | None = None  # (workers, classes, labels)
+    probas_: NDArray[np.float64] | None = None  # (tasks, classes)
+    n_iter_: int = 0
+
+    def fit(
+        self,
+        tasks: Sequence[int] | NDArray[np.intp],
+        workers: Sequence[str],
+        labels: Sequence[str],
+        *,
+        classes: Sequence[str],
+        n_tasks: int | None = None,
+        weights: Sequence[float] | NDArray[np.float64] | None = None,
+        votes: Sequence[float] | NDArray[np.float64] | None = None,
+        vote_classes: Sequence[str | None] | None = None,
+        none_votes: Sequence[float] | NDArray[np.float64] | None = None,
+    ) -> DawidSkene:
+        """Fit on a long table of observations (task index, worker, label).
+
+        ``classes``: the latent classes (labels equal to a class name vote for it at
+        initialisation); ``n_tasks``: number of tasks (default: max index + 1); ``weights``: each
+        observation's weight in both steps (default 1). The initial posterior is a vote: each
+        observation gives ``votes`` (default: ``weights``) to the class ``vote_classes`` names
+        (default: its label, when that is a class; None: no vote) and ``none_votes`` (default 0)
+        to "none of these", which also starts with ``none_prior_votes`` on every task.
+        """
+        t = np.asarray(tasks, dtype=np.intp)
+        n_obs = t.shape[0]
+        w = np.ones(n_obs) if weights is None else np.asarray(weights, dtype=np.float64)
+        v0 = w if votes is None else np.asarray(votes, dtype=np.float64)
+        n_t = int(n_tasks if n_tasks is not None else (t.max() + 1 if n_obs else 0))
+        cls = list(classes) + ([NONE_CLASS] if self.none_class else [])
+        k = len(cls)
+        worker_names, wi = np.unique(np.asarray(workers, dtype=object).astype(str), return_inverse=True)
+        label_names, li = np.unique(np.asarray(labels, dtype=object).astype(str), return_inverse=True)
+        self.classes_, self.labels_, self.workers_ = cls, list(label_names), list(worker_names)
+        n_w, n_l = len(worker_names), len(label_names)
+        # initial posterior: a weighted vote, "none" with its prior votes
+        class_of = {name: j for j, name in enumerate(cls)}
+        if vote_classes is None:
+            lab_class = np.array([class_of.get(name, -1) for name in label_names], dtype=np.intp)
+            oc = lab_class[li]
+        else:
+            oc = np.array([-1 if name is None else class_of.get(name, -1) for name in vote_classes], dtype=np.intp)
+        q = np.zeros((n_t, k))
+        m = oc >= 0
+        np.add.at(q, (t[m], oc[m]), v0[m])
+        if self.none_class:
+            q[:, k - 1] += self.none_prior_votes
+            if none_votes is not None:
+                np.add.at(q[:, k - 1], t, np.asarray(none_votes, dtype=np.float64))
+        empty = q.sum(axis=1) <= 0
+        q[empty] = 1.0
+        q /= q.sum(axis=1, keepdims=True)
+        return self.fit_coded(t, wi, li, n_w, n_l, q, w)
+
+    def fit_coded(self, tasks: NDArray[np.intp], workers: NDArray[np.intp], labels: NDArray[np.intp], n_workers: int,
+                  n_labels: int, initial: NDArray[np.float64], weights: NDArray[np.float64] | None = None) -> DawidSkene:
+        """EM from integer-coded observations (task, worker, label indices) and an initial posterior
+        ``initial`` (tasks x classes, rows summing to 1): the core :meth:`fit` calls after coding its
+        table, for callers that keep their table coded (``sgbelief.fusion.consensus``). The class,
+        label and worker names are left as they are."""
+        t = np.asarray(tasks, dtype=np.intp)
+        w = np.ones(t.shape[0]) if weights is None else np.asarray(weights, dtype=np.float64)
+        q = np.asarray(initial, dtype=np.float64)
+        n_t = q.shape[0]
+        # the observations as a sparse (tasks x (worker, label) cells) matrix of weights: both EM
+        # steps are then one sparse product each
+        cells = sparse.csr_matrix((w, (t, np.asarray(workers, dtype=np.intp) * n_labels + labels)),
+                                  shape=(n_t, n_workers * n_labels))
+        theta = pi = None
+        it = 0
+        for it in range(1, self.n_iter + 1):
+            theta, pi = self._m_step(q, cells, n_workers, n_labels)
+            q_new = self._e_step(theta, pi, cells)
+            delta = float(np.max(np.abs(q_new - q))) if n_t else 0.0
+            q = q_new
+            if delta <= self.tol:
+                break
+        if theta is None:  # n_iter == 0: the initial vote
+            theta, pi = self._m_step(q, cells, n_workers, n_labels)
+        self.priors_, self.errors_, self.probas_, self.n_iter_ = pi, theta, q, it
+        return self
+
+    def _m_step(self, q: NDArray[np.float64], cells: sparse.csr_matrix, n_w: int,
+                n_l: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """pi_z = mean q_v(z) (smoothed); theta_w[z, l] ∝ smoothing + sum of q over w's observations labelled l."""
+        k = q.shape[1]
+        counts = np.asarray(cells.T @ q)  # ((worker, label) cells, classes)
+        counts = counts.reshape(n_w, n_l, k).transpose(0, 2, 1) + self.smoothing  # (workers, classes, labels)
+        counts = np.maximum(counts, _EPS)
+        theta = counts / counts.sum(axis=2, keepdims=True)
+        pi = q.sum(axis=0) + self.smoothing
+        pi = np.maximum(pi, _EPS)
+        return theta, pi / pi.sum()
+
+    @staticmethod
+    def _e_step(theta: NDArray[np.float64], pi: NDArray[np.float64], cells: sparse.csr_matrix) -> NDArray[np.float64]:
+        """log q_v(z) = log pi_z + sum_o w_o log theta_{w_o}[z, l_o], normalised per v."""
+        n_w, k, n_l = theta.shape
+        log_theta = np.log(theta).transpose(0, 2, 1).reshape(n_w * n_l, k)  # ((worker, label) cells, classes)
+        log_lik = np.asarray(cells @ log_theta) + np.log(pi)
+        log_lik -= log_lik.max(axis=1, keepdims=True)
+        q = np.exp(log_lik)
+        return q / q.sum(axis=1, keepdims=True)
+
+    def class_index(self, name: str) -> int:
+        """Index of a latent class in ``classes_`` (ValueError if unknown)."""
+        assert self.classes_ is not None, "fit first"
+        return self.classes_.index(name)

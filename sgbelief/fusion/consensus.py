@@ -1,0 +1,276 @@
+"""The map-wide consensus behind the calibration of claims the geometric channel cannot adjudicate.
+
+A :class:`MapConsensus` belongs to one map (one provenance store) and holds
+
+* the claim table: every claim of an exclusive class the operator applied (element, predicate,
+  context, confidence, its calibration cell, whether the channel adjudicated it, event id);
+* the labels the geometric channel gave, once per (element, time);
+* per element, the claims each exclusive class received so far (a claim's standing,
+  :func:`~sgbelief.fusion.rules.standing`).
+
+Every so often (at least ``every`` new claims and ``growth`` times the claims held, so O(log n)
+refits over a stream) it refits, in one batch over the whole table:
+
+1. a Dawid–Skene model (:class:`~sgbelief.calibration.dawid_skene.DawidSkene`): the latent class
+   of each element among the exclusive classes plus "none of these", a confusion per worker,
+   where a worker is a claim's context and its confidence bin (by rank within the context, so the
+   model is invariant under a monotone transform of the confidences), the element's support (how
+   many claims it received, bucketed: stray detections on clutter are rarely repeated) or the
+   geometric channel, whose every label (``otherprop`` included) is an observation with a learned
+   confusion;
+2. the consensus outcome of each silent claim, q_v(phi), and from those the per-cell isotonic
+   calibration (:class:`~sgbelief.calibration.consensus.ConsensusCalibration`).
+
+The operator asks :meth:`MapConsensus.likelihood_ratio` for a silent claim's (Lambda_hat,
+kappa_hat); until the first refit it answers None and the operator uses §4.1's calibrator as before.
+Per-event work is O(1): appending a row and two dictionary updates.
+"""
+
+from __future__ import annotations
+
+from array import array
+from collections.abc import Hashable, Mapping
+from typing import Any
+
+import numpy as np
+
+from sgbelief.calibration.config import CalibrationConfig
+from sgbelief.calibration.consensus import ConsensusCalibration
+from sgbelief.calibration.dawid_skene import NONE_CLASS, DawidSkene
+
+__all__ = ["MapConsensus", "GEOMETRIC_WORKER", "SUPPORT_WORKER", "support_bucket"]
+
+#: the Dawid–Skene worker name of the geometric channel
+GEOMETRIC_WORKER = "<geometric>"
+#: the Dawid–Skene worker whose label is how many claims an element received (its support)
+SUPPORT_WORKER = "<support>"
+#: the most classes a map's table codes (cell and class share one integer key in the calibration)
+_MAX_CLASSES = 1 << 20
+#: support buckets: 1, 2, 3, 4-5, 6-9, 10+ claims
+_SUPPORT_EDGES = (1, 2, 3, 4, 6, 10)
+
+
+def support_bucket(n: int) -> int:
+    """The support observation of an element with ``n`` claims: the index of its bucket 1, 2, 3, 4-5, 6-9, 10+."""
+    b = 0
+    for i, edge in enumerate(_SUPPORT_EDGES):
+        if n >= edge:
+            b = i
+    return b
+
+
+class _Codes:
+    """Names <-> small integer codes, in order of first appearance."""
+
+    __slots__ = ("index", "names")
+
+    def __init__(self) -> None:
+        self.index: dict[Hashable, int] = {}
+        self.names: list[Any] = []
+
+    def code(self, name: Hashable) -> int:
+        i = self.index.get(name)
+        if i is None:
+            i = self.index[name] = len(self.names)
+            self.names.append(name)
+        return i
+
+
+class MapConsensus:
+    """Claim table, channel labels and the consensus calibration of one map (see the module docstring)."""
+
+    def __init__(self, config: CalibrationConfig, exclusive: frozenset[str],
+                 asserted: Mapping[str, tuple[str, ...]] | None = None) -> None:
+        cc = config.consensus
+        self.every, self.growth, self.bins = cc.every, cc.growth, cc.bins
+        self.exclusive = exclusive
+        #: label -> the predicates it asserts (the vocabulary's positive sets): a label's initial vote
+        self.asserted = asserted or {}
+        self._ds = DawidSkene(n_iter=cc.n_iter, smoothing=cc.smoothing, none_class=True)
+        self.calibration = ConsensusCalibration(config.target_size, config.kappa_min, config.lr_max, config.cold_start)
+        # codes of elements (the Dawid-Skene tasks), classes, contexts, cells and channel labels
+        self._tasks, self._classes, self._contexts, self._cells, self._labels = (_Codes() for _ in range(5))
+        # the claim table: one row per claim, integer codes and floats in typed arrays (~50 bytes a claim)
+        self.task, self.cls, self.ctx_code, self.cell_code = array("l"), array("l"), array("l"), array("l")
+        self.conf = array("d")
+        self.mass = array("d")
+        self.decisive = bytearray()
+        self.event: list[str] = []
+        #: the channel's labels: label code per (element, time) seen
+        self.labels: dict[tuple[Any, int], int] = {}
+        #: element -> {exclusive predicate: claims so far}
+        self.counts: dict[Any, dict[str, int]] = {}
+        self.n_at_fit = 0
+        self.n_fits = 0
+
+    # decoded columns (diagnostics, tests)
+    @property
+    def node(self) -> list[Any]:
+        return [self._tasks.names[i] for i in self.task]
+
+    @property
+    def pred(self) -> list[str]:
+        return [self._classes.names[i] for i in self.cls]
+
+    @property
+    def ctx(self) -> list[str]:
+        return [self._contexts.names[i] for i in self.ctx_code]
+
+    @property
+    def cell(self) -> list[Hashable]:
+        return [self._cells.names[i] for i in self.cell_code]
+
+    # ------------------------------------------------------------------ per claim
+    def standing_counts(self, node: Any, predicate: str, rivals: tuple[str, ...] | frozenset[str]) -> tuple[int, int, int]:
+        """(claims of ``predicate`` at ``node``, claims of its rivals there, the most any rival has)."""
+        held = self.counts.get(node)
+        if not held:
+            return 0, 0, 0
+        n_others = max_other = 0
+        for p, n in held.items():
+            if p in rivals:
+                n_others += n
+                if n > max_other:
+                    max_other = n
+        return held.get(predicate, 0), n_others, max_other
+
+    def add_claim(self, node: Any, predicate: str, context: str, confidence: float, cell: Hashable,
+                  decisive: bool, event_id: str, mass: float = 1.0) -> None:
+        """Append one applied claim of an exclusive class (``mass``: its targeting mass T(v))."""
+        self.task.append(self._tasks.code(node))
+        self.cls.append(self._classes.code(predicate))
+        self.ctx_code.append(self._contexts.code(context))
+        self.cell_code.append(self._cells.code(cell))
+        self.conf.append(confidence)
+        self.mass.append(mass)
+        self.decisive.append(1 if decisive else 0)
+        self.event.append(event_id)
+        held = self.counts.get(node)
+        if held is None:
+            held = self.counts[node] = {}
+        held[predicate] = held.get(predicate, 0) + 1
+
+    def add_label(self, node: Any, t: int, label: str) -> None:
+        """The channel labelled ``node`` ``label`` at time ``t`` (kept once per (node, t))."""
+        self.labels[(node, t)] = self._labels.code(label)
+
+    def drop_events(self, event_ids: set[str]) -> None:
+        """Forget the claims of retracted events (the next refit no longer sees them)."""
+        keep = [i for i, e in enumerate(self.event) if e not in event_ids]
+        if len(keep) == len(self.event):
+            return
+        for name in ("task", "cls", "ctx_code", "cell_code", "conf", "mass"):
+            col = getattr(self, name)
+            setattr(self, name, array(col.typecode, [col[i] for i in keep]))
+        self.decisive = bytearray(self.decisive[i] for i in keep)
+        self.event = [self.event[i] for i in keep]
+        self.counts = {}
+        for node, pred in zip(self.node, self.pred):
+            held = self.counts.setdefault(node, {})
+            held[pred] = held.get(pred, 0) + 1
+
+    # ------------------------------------------------------------------ batches
+    def due(self) -> bool:
+        """Whether enough claims arrived since the last refit: max(every, growth * held) new ones."""
+        n = len(self.event)
+        return n - self.n_at_fit >= max(self.every, self.growth * self.n_at_fit)
+
+    def likelihood_ratio(self, confidence: float, cell: Hashable, predicate: str,
+                         context: str) -> tuple[float, float] | None:
+        """(Lambda_hat, kappa_hat) of a silent claim from the consensus calibration, or None before the first refit.
+
+        The levels, finest first: the claim's cell for its predicate, its cell, its context."""
+        cal = self.calibration
+        if not cal.fitted:
+            return None
+        cell_i = self._cells.index.get(cell, -1)
+        cls_i = self._classes.index.get(predicate, -1)
+        return cal.likelihood_ratio(confidence, (cell_i * _MAX_CLASSES + cls_i if cell_i >= 0 and cls_i >= 0 else -1,
+                                                 cell_i, self._contexts.index.get(context, -1)))
+
+    def refit(self) -> None:
+        """Refit the Dawid–Skene model and the per-cell calibration on the whole table."""
+        n = len(self.event)
+        self.n_at_fit = n
+        self.n_fits += 1
+        if n == 0:
+            return
+        probas = self.fit_consensus()
+        silent = np.flatnonzero(np.frombuffer(bytes(self.decisive), dtype=np.uint8) == 0)
+        if silent.size == 0:
+            return
+        cls = np.asarray(self.cls, dtype=np.int64)[silent]
+        cell = np.asarray(self.cell_code, dtype=np.int64)[silent]
+        q = probas[np.asarray(self.task, dtype=np.int64)[silent], cls]
+        c = np.asarray(self.conf)[silent]
+        levels = [cell * _MAX_CLASSES + cls, cell, np.asarray(self.ctx_code, dtype=np.int64)[silent]]
+        self.calibration.fit(levels, c, q)
+
+    def fit_consensus(self) -> np.ndarray:
+        """The Dawid–Skene posterior over classes (+ none) per element (rows: task codes, columns:
+        class codes, the last one *none*); the fitted model is ``self.ds_``."""
+        n_t, k, b = len(self._tasks.names), len(self._classes.names), self.bins
+        n_ctx, n_geo = len(self._contexts.names), len(self._labels.names)
+        task = np.asarray(self.task, dtype=np.intp)
+        cls = np.asarray(self.cls, dtype=np.intp)
+        ctx = np.asarray(self.ctx_code, dtype=np.intp)
+        mass = np.asarray(self.mass)
+        bins, ranks = self._bins(ctx, np.asarray(self.conf))
+        # label space: (class, bin) of a claim | support bucket | channel label
+        support_base, geo_base = k * b, k * b + len(_SUPPORT_EDGES)
+        n_claims = np.bincount(task, minlength=n_t)
+        support = np.array([support_bucket(int(x)) for x in n_claims], dtype=np.intp)
+        geo = [(self._tasks.index.get(node, -1), code) for (node, _t), code in self.labels.items()]
+        geo_arr = np.array([g for g in geo if g[0] >= 0], dtype=np.intp).reshape(-1, 2)
+        tasks = np.concatenate([task, np.arange(n_t), geo_arr[:, 0]])
+        workers = np.concatenate([ctx, np.full(n_t, n_ctx), np.full(len(geo_arr), n_ctx + 1)])
+        labels = np.concatenate([cls * b + bins, support_base + support, geo_base + geo_arr[:, 1]])
+        # a claim is about v with probability T(v); support and labels count once
+        weights = np.concatenate([mass, np.ones(n_t + len(geo_arr))])
+        # initial vote: a claim votes for its class by its confidence rank and for "none" by the rest;
+        # a label for the class it asserts, any other label (otherprop, ...) for "none"
+        q = np.zeros((n_t, k + 1))
+        np.add.at(q, (task, cls), ranks * mass)
+        q[:, k] += self._ds.none_prior_votes + np.bincount(task, weights=(1.0 - ranks) * mass, minlength=n_t)
+        label_class = np.array([self._label_class(name) for name in self._labels.names] or [0], dtype=np.intp)
+        if len(geo_arr):
+            vote = label_class[geo_arr[:, 1]]
+            np.add.at(q, (geo_arr[:, 0], np.where(vote >= 0, vote, k)), 1.0)
+        q /= q.sum(axis=1, keepdims=True)
+        ds = self._ds.fit_coded(tasks, workers, labels, n_ctx + 2, geo_base + n_geo, q, weights)
+        ds.classes_ = [*self._classes.names, NONE_CLASS]
+        ds.workers_ = [*self._contexts.names, SUPPORT_WORKER, GEOMETRIC_WORKER]
+        ds.labels_ = ([f"{c}|b{i}" for c in self._classes.names for i in range(b)]
+                      + [f"n{i}" for i in range(len(_SUPPORT_EDGES))] + ["geo:" + g for g in self._labels.names])
+        self.ds_ = ds
+        return ds.probas_  # type: ignore[return-value]
+
+    def class_of(self, predicate: str) -> int:
+        """The column of ``predicate`` in :meth:`fit_consensus`'s posterior (-1 if never claimed)."""
+        return self._classes.index.get(predicate, -1)
+
+    def task_of(self, node: Any) -> int:
+        """The row of ``node`` in :meth:`fit_consensus`'s posterior (-1 if never claimed)."""
+        return self._tasks.index.get(node, -1)
+
+    def _label_class(self, label: str) -> int:
+        for p in self.asserted.get(label, ()):
+            i = self._classes.index.get(p)
+            if i is not None:
+                return i
+        return -1
+
+    def _bins(self, ctx: np.ndarray, conf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each claim's confidence bin and rank quantile within its context: ``bins`` equal-count
+        bins of the rank, and (rank + 1) / n in (0, 1]. Ranks (ties share the lowest) make both
+        invariant under a strictly increasing transform of the confidences."""
+        bins = np.zeros(len(conf), dtype=np.intp)
+        quant = np.ones(len(conf))
+        for j in np.unique(ctx).tolist():
+            idx = np.flatnonzero(ctx == j)
+            c = conf[idx]
+            ranks = np.searchsorted(np.sort(c), c, side="left")
+            if self.bins > 1:
+                bins[idx] = np.minimum(ranks * self.bins // len(idx), self.bins - 1)
+            quant[idx] = (ranks + 1) / len(idx)
+        return bins, quant

@@ -1,0 +1,236 @@
+"""Where the geometric channel is silent: the consensus calibration (Dawid–Skene over the map), the
+claim cells it calibrates (adjudication, standing), and the exclusive-class coupling.
+
+Hand-computed values for each step function; regressions for the failure modes of issue #30 (a lone
+claim on an element the channel cannot adjudicate, scattered exclusive claims, a systematic
+confusion with no channel); Eq. 4 and exact retraction with the options on. Engine equivalence
+with the options on is in tests/test_engines.py.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sgbelief import SceneGraph, make_operator
+from sgbelief.calibration.consensus import ConsensusCalibration, fit_cell
+from sgbelief.fusion.compatibility import SubsumptionTable
+from sgbelief.fusion.config import OperatorConfig
+from sgbelief.fusion.consensus import MapConsensus, support_bucket
+from sgbelief.fusion.events import EvidenceEvent
+from sgbelief.fusion.rules import adjudication, consensus_cell, exclusion_increments, standing, targeting
+from sgbelief.graph.provenance import EntryVerdict
+
+CLASSES = ["bed", "chair", "sofa", "toilet", "tv"]
+
+
+def _table() -> SubsumptionTable:
+    specs = {f"is_{k}": {"positive": [k], "negative": [j for j in CLASSES if j != k]} for k in CLASSES}
+    return SubsumptionTable(specs, name="five", labels=[*CLASSES, "otherprop"])
+
+
+# ----------------------------------------------------------------------------- step functions
+def test_adjudication_standing_and_cell_by_hand() -> None:
+    assert adjudication("chair", 1) == "decisive"
+    assert adjudication("sofa", 0) == "decisive"
+    assert adjudication("otherprop", None) == "ambiguous"
+    assert adjudication(None, None) == "unseen"
+    assert standing(0, 0, 0) == "alone"
+    assert standing(2, 3, 2) == "leading"  # ties lead
+    assert standing(1, 3, 2) == "trailing"
+    assert consensus_cell("det", 2, "ambiguous", "alone", "part") == "det|s2|ambiguous|alone|part"
+    assert targeting(0.5) == "whole" and targeting(0.49) == "part"
+    assert exclusion_increments(0.7) == (0.0, 0.7)
+    assert [support_bucket(n) for n in (1, 2, 3, 4, 5, 6, 9, 10, 50)] == [0, 1, 2, 3, 3, 4, 4, 5, 5]
+
+
+def test_exclusive_predicates_follow_the_table() -> None:
+    table = _table()
+    assert table.exclusive_with("is_bed") == ("is_chair", "is_sofa", "is_toilet", "is_tv")
+    assert table.exclusive_predicates() == frozenset(f"is_{k}" for k in CLASSES)
+    # a predicate whose positive label another does not deny is not exclusive with it
+    loose = SubsumptionTable({"is_car": {"positive": ["car"], "negative": ["person"]},
+                              "is_parked": {"positive": ["parked car"], "negative": []}}, name="loose")
+    assert loose.exclusive_with("is_car") == ()
+
+
+def test_fit_cell_is_weighted_isotonic_regression() -> None:
+    """Equal confidences pooled (weighted mean), then PAVA: hand-computed."""
+    kx, ky = fit_cell(np.array([0.2, 0.2, 0.5, 0.9]), np.array([1.0, 0.0, 0.2, 0.8]), np.array([1.0, 1.0, 2.0, 1.0]))
+    # points: 0.2 -> 0.5 (w 2), 0.5 -> 0.2 (w 2), 0.9 -> 0.8: the first two pool to 0.35
+    assert kx == [0.2, 0.5, 0.9]
+    assert ky == pytest.approx([0.35, 0.35, 0.8])
+
+
+def test_consensus_likelihood_ratio_shrinks_level_by_level() -> None:
+    """log Lambda = l1 log L1 + (1 - l1) [l2 log L2 + (1 - l2) log L_cold], l = min(1, n / target)."""
+    cal = ConsensusCalibration(target_size=4, kappa_min=0.05, lr_max=1000.0, cold_start="raw")
+    # fine level: 2 claims at c = 0.6 with q = 0.25; coarse: those plus 2 at c = 0.6 with q = 0.75
+    fine, coarse = np.array([0, 0, 1, 1]), np.zeros(4, dtype=int)  # level keys per claim: cells 0 / 1, one pool
+    cal.fit([fine, coarse], np.full(4, 0.6), np.array([0.25, 0.25, 0.75, 0.75]))
+    lam, kappa = cal.likelihood_ratio(0.6, (0, 0))
+    eps_fine, eps_coarse = 0.5 / 3, 0.5 / 5
+    lo_coarse = math.log(0.5 / 0.5)  # pooled q = 0.5, inside [eps, 1 - eps]
+    lo_fine = math.log(max(0.25, eps_fine) / (1 - max(0.25, eps_fine)))
+    cold = math.log(0.6 / 0.4)
+    expected = 0.5 * lo_fine + 0.5 * (1.0 * lo_coarse + 0.0 * cold)
+    assert math.log(lam) == pytest.approx(expected)
+    assert kappa == pytest.approx(0.5 + 0.5 * 1.0)
+    assert eps_coarse < 0.5  # (the pooled fit needs no clip)
+    assert cal.likelihood_ratio(0.6, (7,))[0] == pytest.approx(0.6 / 0.4)  # cold start
+
+
+# ----------------------------------------------------------------------------- streams
+def _map_stream(seed: int, *, n_real: int = 40, n_clutter: int = 60, label: str | None = "otherprop",
+                scattered: bool = False, t0: int = 0):
+    """Real elements: 8 agreeing confident claims each, with a decisive label half the time;
+    clutter: one weak claim each (or two to four scattered ones), the channel silent or ambiguous."""
+    rng = random.Random(seed)
+    claims = []  # (node, class, confidence, label), interleaved in time as a robot would see them
+    for v in range(n_real):
+        k = CLASSES[v % len(CLASSES)]
+        claims += [(f"r{v}", k, rng.uniform(0.6, 0.95), k if rng.random() < 0.5 else None) for _ in range(8)]
+    for v in range(n_clutter):
+        claims += [(f"c{v}", rng.choice(CLASSES), rng.uniform(0.4, 0.75), label)
+                   for _ in range(rng.randint(2, 4) if scattered else 1)]
+    rng.shuffle(claims)
+    items = []
+    for i, (node, k, c, lab) in enumerate(claims):
+        t = t0 + i + 1
+        items.append((EvidenceEvent({node: 1.0}, f"is_{k}", c, "det", t, f"e{t}"), {node: lab}))
+    return items, t0 + len(claims)
+
+
+def _run(items, config=None, name="comod"):
+    from sgbelief.fusion.channel import FrameLabels
+
+    op = make_operator(name, config, _table())
+    g = SceneGraph(create_nodes=True)
+    op.update_many(g, [(ev, FrameLabels(labels)) for ev, labels in items])
+    return op, g
+
+
+@pytest.mark.parametrize("label", ["otherprop", None])
+def test_a_lone_claim_the_channel_cannot_adjudicate_does_not_commit(label) -> None:
+    """On a map where lone weak claims land on clutter, a new lone claim on an element whose label
+    is ambiguous (or absent) is calibrated on what such claims turned out to be: it does not commit."""
+    items, t = _map_stream(0, label=label)
+    op, g = _run(items)
+    from sgbelief.fusion.channel import FrameLabels
+
+    for i, c in enumerate((0.45, 0.55, 0.65)):  # confidences of the clutter's range (real: 0.6-0.95)
+        op.update(g, EvidenceEvent({f"new{i}": 1.0}, "is_tv", c, "det", t + 1 + i, f"new{i}"), FrameLabels({f"new{i}": label}))
+        assert g.probability(f"new{i}", "is_tv") <= 0.5, (c, g.probability(f"new{i}", "is_tv"))
+    # the consensus was fitted on the map (not the cold start) and real elements still commit
+    cons = next(iter(op._consensus.values()))[1]
+    assert cons.n_fits >= 2
+    committed_real = sum(g.probability(f"r{v}", f"is_{CLASSES[v % 5]}") > 0.5 for v in range(40))
+    assert committed_real >= 38
+
+
+@pytest.mark.parametrize("order", [("toilet", "bed", "bed", "tv"), ("bed", "toilet", "bed", "tv"),
+                                   ("bed", "bed", "toilet", "tv"), ("tv", "bed", "toilet", "bed")])
+def test_scattered_exclusive_claims_do_not_commit(order) -> None:
+    """An element claimed once as toilet, twice as bed and once as tv is none of them, in any order."""
+    items, t = _map_stream(1, label=None, scattered=True)
+    op, g = _run(items)
+    from sgbelief.fusion.channel import FrameLabels
+
+    for i, k in enumerate(order):
+        op.update(g, EvidenceEvent({"odd": 1.0}, f"is_{k}", 0.7, "det", t + 1 + i, f"odd{i}"), FrameLabels({"odd": None}))
+    for k in set(order):
+        assert g.probability("odd", f"is_{k}") <= 0.5, (order, k, g.probability("odd", f"is_{k}"))
+
+
+def test_without_the_coupling_two_scattered_claims_of_one_class_commit() -> None:
+    """The regression above fails without the options: per-predicate Betas commit is_bed."""
+    items, t = _map_stream(1, label=None, scattered=True)
+    cfg = {"exclusive_evidence": "none", "calibration": {"consensus": {"method": "none"}}}
+    op, g = _run(items, cfg)
+    from sgbelief.fusion.channel import FrameLabels
+
+    for i, k in enumerate(("toilet", "bed", "bed", "tv")):
+        op.update(g, EvidenceEvent({"odd": 1.0}, f"is_{k}", 0.7, "det", t + 1 + i, f"odd{i}"), FrameLabels({"odd": None}))
+    assert g.probability("odd", "is_bed") > 0.5
+
+
+def test_exclusion_entries_are_recorded_under_the_claim_and_retract_with_it() -> None:
+    op = make_operator("comod", None, _table())
+    g = SceneGraph(create_nodes=True)
+    op.update(g, EvidenceEvent({"v": 1.0}, "is_bed", 0.8, "det", 1, "a"), None)
+    op.update(g, EvidenceEvent({"v": 1.0}, "is_chair", 0.8, "det", 2, "b"), None)
+    entries = g.provenance.entries("v", "is_bed")
+    excl = [e for e in entries if e.verdict is EntryVerdict.EXCLUSION]
+    assert len(excl) == 1 and excl[0].event_id == "b" and excl[0].d_alpha == 0.0
+    (own_b,) = [e for e in g.provenance.entries("v", "is_chair") if e.event_id == "b"]
+    assert excl[0].d_beta == pytest.approx(own_b.d_alpha)  # the claim's d_alpha, against the rival
+    # no entry at a rival pair the log did not hold (is_sofa never claimed)
+    assert ("v", "is_sofa") not in g.provenance
+    before = g.provenance.alpha_beta("v", "is_bed")
+    op.retract(g, "b")
+    after = g.provenance.alpha_beta("v", "is_bed")
+    assert after == pytest.approx((before[0], before[1] - own_b.d_alpha))
+    assert g.provenance.reconstruct("v", "is_bed") == pytest.approx(after)
+
+
+def test_a_refused_claim_excludes_nothing() -> None:
+    from sgbelief.fusion.channel import FrameLabels
+
+    op = make_operator("comod", None, _table())
+    g = SceneGraph(create_nodes=True)
+    op.update(g, EvidenceEvent({"v": 1.0}, "is_bed", 0.8, "det", 1, "a"), None)
+    op.update(g, EvidenceEvent({"v": 1.0}, "is_chair", 0.9, "det", 2, "b"), FrameLabels({"v": "bed"}))  # ⊥
+    assert not [e for e in g.provenance.entries("v", "is_bed") if e.verdict is EntryVerdict.EXCLUSION]
+
+
+def test_a_systematic_confusion_is_learned_with_no_channel() -> None:
+    """No channel: chairs are claimed 'sofa' 35 % of the time by one context. The consensus' Dawid–Skene
+    learns that confusion and still names the chairs (tolerance: 90 % of 60 chairs)."""
+    rng = random.Random(3)
+    cons = MapConsensus(OperatorConfig().calibration, frozenset(f"is_{k}" for k in CLASSES))
+    for v in range(120):
+        k = "chair" if v < 60 else rng.choice(["bed", "sofa", "tv"])
+        for _ in range(6):
+            said = "sofa" if (k == "chair" and rng.random() < 0.35) else k
+            cons.add_claim(f"v{v}", f"is_{said}", "det", rng.uniform(0.5, 0.9), "cell", False, f"e{v}")
+    probas = cons.fit_consensus()
+    chairs = [cons.task_of(f"v{v}") for v in range(60)]
+    assert (probas[chairs].argmax(1) == cons.class_of("is_chair")).mean() >= 0.9
+    ds = cons.ds_
+    row = ds.errors_[ds.workers_.index("det"), ds.class_index("is_chair")]
+    said_sofa = sum(row[j] for j, lab in enumerate(ds.labels_) if lab.startswith("is_sofa|"))
+    assert 0.2 < said_sofa < 0.5  # the learned confusion, near the true 0.35
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), retract=st.integers(0, 59))
+def test_eq4_and_exact_retraction_with_the_options_on(seed: int, retract: int) -> None:
+    """Every pair's belief is the prior plus its counted entries (Eq. 4), before and after retracting
+    an event, with consensus and exclusion on (refits every 5 claims)."""
+    rng = random.Random(seed)
+    items = []
+    for t in range(60):
+        v = f"n{rng.randrange(6)}"
+        lab = rng.choice([None, "otherprop", *CLASSES])
+        items.append((EvidenceEvent({v: 1.0}, f"is_{rng.choice(CLASSES)}", rng.random(), "det", t, f"e{t}"), {v: lab}))
+    cfg = {"calibration": {"consensus": {"every": 5, "growth": 0.0}}}
+    op, g = _run(items, cfg)
+    prov = g.provenance
+    for node, pred in list(prov.pairs()):
+        assert prov.alpha_beta(node, pred) == pytest.approx(prov.reconstruct(node, pred))
+    op.retract(g, f"e{retract}")
+    assert not prov.has_event(f"e{retract}")
+    for node, pred in list(prov.pairs()):
+        assert prov.alpha_beta(node, pred) == pytest.approx(prov.reconstruct(node, pred))
+
+
+def test_the_paper_variant_turns_both_off() -> None:
+    op = make_operator("comod_paper", None, _table())
+    assert op.config.exclusive_evidence == "none"
+    assert op.config.calibration.consensus.method == "none"
+    assert not op.consensus_classes and not op.excludes_rivals
