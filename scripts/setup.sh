@@ -38,4 +38,12 @@ if ! "$VENV/bin/python" -c "import rerun" >/dev/null 2>&1; then
     echo "[setup] installing rerun-sdk (optional: sgbelief record)"
     $PIP install -q "rerun-sdk>=0.41,<0.42" || echo "[setup] warning: rerun-sdk did not install; sgbelief record and its tests are unavailable" >&2
 fi
+# crowd-kit: the field's reference Dawid-Skene, which tests/test_dawid_skene.py checks sgbelief's
+# against (a test dependency only). Its declared dependencies include transformers and pyarrow,
+# which its aggregation module never imports: install it without them, plus what that module needs.
+if ! "$VENV/bin/python" -c "import crowdkit.aggregation" >/dev/null 2>&1; then
+    echo "[setup] installing crowd-kit (test reference for Dawid-Skene)"
+    ($PIP install -q --no-deps "crowd-kit==1.4.2" && $PIP install -q attrs nltk "pandas>=2") \
+        || echo "[setup] warning: crowd-kit did not install; its comparison test will be skipped" >&2
+fi
 "$VENV/bin/python" -c "import sgbelief, sys; print('[setup] sgbelief', sgbelief.__version__, 'ready on Python', sys.version.split()[0])"
