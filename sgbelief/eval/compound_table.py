@@ -23,6 +23,7 @@ compound).
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -34,7 +35,8 @@ from sgbelief.calibration.mondrian import MondrianCalibrator
 from sgbelief.eval.metrics import retrieval_f1
 from sgbelief.eval.sim_monolithic import MonolithicRecord
 
-__all__ = ["MIN_N", "FOLDS", "Cell", "CompoundRow", "ModelView", "suite_compound_table", "assign_folds", "cross_fitted_probabilities",
+__all__ = ["MIN_N", "FOLDS", "Cell", "CompoundRow", "ModelView", "suite_compound_table", "suite_folder_table",
+           "bench_section", "assign_folds", "cross_fitted_probabilities",
            "verifiable_outcome", "intersection", "compare_compounds", "compound_cost", "compound_report",
            "render_markdown", "format_text"]
 
@@ -326,7 +328,8 @@ def format_text(rep: Mapping[str, Any], title: str = "") -> str:
         lines.append(f"{r['title'].ljust(w)}  {r['pool_n']:>7d} {100 * r['pool_rate']:>6.1f} "
                      f"{_f(r['pool_operator']['f1']):>6}  {r['n']:>6d} {_cell(r['cold_raw']):>6} {_cell(r['cold_m']):>6} "
                      f"{_cell(r['operator']):>6}" + (f"  {_swap(rep, r['query']):>26}" if swap else ""))
-    return "\n".join(lines + [""] + _notes(rep))
+    notes = [textwrap.fill(n.replace("`", ""), width=max(100, len(head))) for n in _notes(rep)]
+    return "\n".join(lines + [""] + notes)
 
 
 # ------------------------------------------------------------------------------------ one suite
@@ -397,7 +400,41 @@ def bench_section(suite: Any, data: Any, run_a: Any, run_b: Any, *, config: Any,
             if not run.graph.has_node(v):
                 run.graph.add_node(v)
     return suite_compound_table(
-        data, ModelView(recs_a, run_a.operator, run_a.graph, f"{first} ({ctx[first].context})"),
+        data, ModelView(recs_a, run_a.operator, run_a.graph, ctx[first].context),
         operator=run_a.name, config_note=config_note, tau=config.tau, calibration=config.calibration,
-        alpha=config.alpha, seed=suite.seed,
-        swap=ModelView(recs_b, run_b.operator, run_b.graph, f"{second} ({ctx[second].context})"))
+        alpha=config.alpha,
+        swap=ModelView(recs_b, run_b.operator, run_b.graph, ctx[second].context))
+
+
+def suite_folder_table(path: Any, *, vocab: Any = None, queries: Any = None, operator: str = TABLE_OPERATOR,
+                       operator_config: Any = None, tau: float = 0.5) -> dict[str, Any] | None:
+    """Table 4 from a suite folder written by ``sgbelief bench`` (``sgbelief retrieval --suite``):
+    None when the folder has no ``monolithic.jsonl``; the swap column when ``model_swap/`` holds
+    the second model's ``events.jsonl`` and ``monolithic.jsonl``."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from sgbelief.eval.formats import read_events
+    from sgbelief.eval.retrieval import recorded_channel_factory, replay_operator, suite_retrieval_data
+    from sgbelief.eval.sim_monolithic import read_monolithic
+    from sgbelief.fusion.config import OperatorConfig
+
+    folder = Path(path)
+    if not (folder / "monolithic.jsonl").is_file():
+        return None
+    config = OperatorConfig.from_yaml(operator_config) if operator_config else OperatorConfig.default()
+    note = DEFAULT_CONFIG_NOTE if operator_config is None else f"`{operator_config}`"
+    data = suite_retrieval_data(folder, vocab, queries=queries)
+    records = read_monolithic(folder / "monolithic.jsonl")
+    op, graph = replay_operator(data, operator, config)
+    ctx = records[0].context if records else "first model"
+    swap = None
+    swap_dir = folder / SWAP_DIR
+    if (swap_dir / "events.jsonl").is_file() and (swap_dir / "monolithic.jsonl").is_file():
+        events_b = read_events(swap_dir / "events.jsonl")
+        data_b = replace(data, events=events_b, channel_factory=recorded_channel_factory(events_b))
+        recs_b = read_monolithic(swap_dir / "monolithic.jsonl")
+        op_b, graph_b = replay_operator(data_b, operator, config)
+        swap = ModelView(recs_b, op_b, graph_b, recs_b[0].context if recs_b else "second model")
+    return suite_compound_table(data, ModelView(records, op, graph, ctx), operator=op.name, config_note=note,
+                                tau=tau, calibration=config.calibration, alpha=config.alpha, swap=swap)

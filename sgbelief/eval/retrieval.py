@@ -40,7 +40,8 @@ from sgbelief.query.relations import DEFAULT_REGISTRY, RelationConfig, RelationR
 
 __all__ = ["RetrievalData", "CompoundScore", "evaluate_retrieval", "scannet_retrieval_data",
            "suite_retrieval_data", "format_scores", "RetrievalSource", "RetrievalJob", "run_retrieval_job",
-           "evaluate_sources", "retrieval_plans", "retrieved_sets", "replay_operator"]
+           "evaluate_sources", "retrieval_plans", "retrieved_sets", "replay_operator",
+           "recorded_channel_factory"]
 
 
 @dataclass
@@ -393,6 +394,11 @@ class _CachedChannel:
         if node not in self._cache:
             self._cache[node] = self.inner.label(node, t)
         return self._cache[node]
+
+
+def recorded_channel_factory(recs: Sequence[Any]) -> Callable[[], Any]:
+    """A factory of fresh geometric channels replaying the events' recorded ``geometric`` labels."""
+    return _recorded_factory(recs)
 
 
 def _recorded_factory(recs: Sequence[Any]) -> Callable[[], Any]:
