@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from sgbelief.errors import FormatError
+from sgbelief.errors import ConfigError, FormatError
 from sgbelief.eval.sim_config import LatentSpec, SimConfig
 from sgbelief.graph.persistence import atomic_write_text
 from sgbelief.query.named import NamedQuery
@@ -218,6 +218,11 @@ def monolithic_channel(suite: Any, queries: Mapping[str, NamedQuery] | None = No
     if queries is None:
         queries = named_queries(cfg.monolithic.queries or Path(cfg.vocabulary).stem)
     compounds = [CompoundSpec.from_named(nq) for nq in queries.values()]
+    named = {g for comp in compounds for g, _neg in comp.relations}
+    for g in cfg.monolithic.relations:
+        if g not in named:
+            raise ConfigError(f"monolithic.relations.{g}: not a relation of any compound asked "
+                              f"(relations: {sorted(named)})")
     rel_config = replace(next(iter(queries.values())).config, use_committed_labels=False)
     graph = SceneGraph(create_nodes=True)
     for nid, info in suite.nodes.nodes.items():
