@@ -23,7 +23,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sgbelief.cli.bench import parse_seeds  # noqa: E402
 
-CELLS = ("pool_f1", "n", "cold_raw", "cold_m", "operator", "swap_operator", "swap_cold_m")
 
 
 def _cells(rep: dict[str, Any], row: dict[str, Any]) -> dict[str, float | None]:
@@ -31,7 +30,7 @@ def _cells(rep: dict[str, Any], row: dict[str, Any]) -> dict[str, float | None]:
     return {"pool_n": row["pool_n"], "pos_rate": row["pool_rate"], "pool_f1": row["pool_operator"]["f1"], "n": row["n"],
             "cold_raw": row["cold_raw"]["f1"], "cold_m": None if row["cold_m"] is None else row["cold_m"]["f1"],
             "operator": None if row["operator"] is None else row["operator"]["f1"],
-            "swap_operator": sw.get("operator"), "swap_cold_m": sw.get("cold_m")}
+            "swap_operator": sw.get("operator"), "swap_cold_m": sw.get("cold_m"), "swap_cold_raw": sw.get("cold_raw")}
 
 
 def aggregate(per_seed: dict[int, dict[str, Any]]) -> dict[str, Any]:
@@ -69,16 +68,15 @@ def render(agg: dict[str, Any], seeds: list[int]) -> str:
     for suite, rows in agg.items():
         lines += [f"**{suite}**", "",
                   "| compound | pool n | pos % | F1 comod | ∩ n | cold raw | cold + M | comod | comod wins | "
-                  "max swap \\|ΔF1\\| comod / cold + M |", "|---|---|---|---|---|---|---|---|---|---|"]
+                  "max swap \\|ΔF1\\| raw / +M / comod |", "|---|---|---|---|---|---|---|---|---|---|"]
         for q in rows.values():
             v = q["values"]
-            sw_op = [x for x in v["swap_operator"] if x is not None]
-            sw_m = [x for x in v["swap_cold_m"] if x is not None]
+            sw = {k: [x for x in v[k] if x is not None] for k in ("swap_cold_raw", "swap_cold_m", "swap_operator")}
             lines.append(
                 f"| {q['title']} | {_mean(v['pool_n']):.0f} | {100 * _mean(v['pos_rate']):.1f} | {_fmt(_mean(v['pool_f1']))} | "
                 f"{_mean(v['n']):.0f} | {_fmt(_mean(v['cold_raw']))} | {_fmt(_mean(v['cold_m']))} | "
                 f"{_fmt(_mean(v['operator']))} | {q['wins']}/{q['scored']} | "
-                f"{_fmt(max(sw_op) if sw_op else None)} / {_fmt(max(sw_m) if sw_m else None)} |")
+                + " / ".join(_fmt(max(x) if x else None) for x in sw.values()) + " |")
         lines.append("")
     return "\n".join(lines)
 
