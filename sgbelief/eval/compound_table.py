@@ -283,7 +283,9 @@ def _notes(rep: Mapping[str, Any]) -> list[str]:
     if sparse:
         lines.append("Sparse compounds (< 1 % positive on the intersection), commits (true positives): " + "; ".join(
             f"{r['title']}: cold raw {r['cold_raw']['commits']} ({r['cold_raw']['tp']}), "
-            f"{op} {r['operator']['commits']} ({r['operator']['tp']}) of {r['positives']} positives" for r in sparse) + ".")
+            f"{op} {r['operator']['commits']} ({r['operator']['tp']}) of {r['positives']} positives" for r in sparse) + "."
+            + (" With no positive, F1 is 1 when nothing is committed and 0 otherwise." if any(
+                r["positives"] == 0 for r in sparse) else ""))
     if "swap" in rep:
         lines.append(f"Model swap ({rep['swap']['note']}): |ΔF1| on the intersection, cold raw / cold + M / {op}.")
     return lines
