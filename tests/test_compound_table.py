@@ -71,6 +71,18 @@ def test_cross_fitting_never_uses_an_elements_own_outcome() -> None:
         assert seen == {it[3] for it in items if folds[it[0]] != f and it[4] is not None}
 
 
+def test_finest_level_gives_the_full_hierarchys_numbers() -> None:
+    """cold + M reads the finest fitted slice: the default hierarchy gives the same probabilities."""
+    import numpy as np
+
+    from sgbelief.calibration.mondrian import MondrianCalibrator
+
+    rng = np.random.default_rng(0)
+    items = [(f"v{i % 300}", "m", f"q{i // 300}", float(rng.random()), int(rng.random() < 0.3)) for i in range(900)]
+    folds = assign_folds([it[0] for it in items], 10, seed=0)
+    assert cross_fitted_probabilities(items, folds) == cross_fitted_probabilities(items, folds, calibrator=MondrianCalibrator)
+
+
 def test_verifiable_outcome() -> None:
     assert verifiable_outcome(None, [True]) is None  # the channel is undecided: no outcome
     assert verifiable_outcome(0, [None]) == 0  # not the object: the compound fails whatever the geometry
@@ -98,11 +110,10 @@ def _plans(n_small: int, n_big: int):
     recs = []
     for i, v in enumerate(big):
         label = "car" if i % 2 == 0 else "building"
-        recs.append(MonolithicRecord(node=v, query="car_at_intersection", t=0, confidence=0.5 if i == 0 else 0.9 if v in pos_big else 0.3,
-                                     context="m", geometric=label))
+        recs.append(MonolithicRecord(v, "car_at_intersection", 0, 0.5 if i == 0 else 0.9 if v in pos_big else 0.3, "m",
+                                     label))
     for v in small:
-        recs.append(MonolithicRecord(node=v, query="pedestrian_at_intersection", t=0, confidence=0.8, context="m",
-                                     geometric="person"))
+        recs.append(MonolithicRecord(v, "pedestrian_at_intersection", 0, 0.8, "m", "person"))
     return plans, recs, pos_big
 
 

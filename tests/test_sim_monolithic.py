@@ -14,7 +14,6 @@ from sgbelief.errors import FormatError
 from sgbelief.eval.sim_config import LatentSpec, load_sim_config
 from sgbelief.eval.sim_monolithic import (
     CompoundSpec,
-    MonolithicRecord,
     compound_latent,
     generate_claims,
     literal_latent,
@@ -169,7 +168,7 @@ def test_file_round_trip_and_errors(tmp_path: Path, small_suite) -> None:
     p = write_monolithic(tmp_path / "monolithic.jsonl", recs)
     assert read_monolithic(p) == recs
     bad = tmp_path / "bad.jsonl"
-    good = MonolithicRecord(node="a", query="q", t=0, confidence=0.5, context="m", geometric=None).model_dump_json()
+    good = '{"node": "a", "query": "q", "t": 0, "confidence": 0.5, "context": "m", "geometric": null}'
     bad.write_text(good + "\n" + good.replace("0.5", "1.5") + "\n")
     with pytest.raises(FormatError, match=r"bad.jsonl:2.*confidence"):
         read_monolithic(bad)

@@ -6,8 +6,11 @@ For each named compound Q, on top of the operator's full pool (``sgbelief.eval.r
   unoccluded view, :mod:`sgbelief.eval.sim_monolithic`); the positives are the pool's, restricted;
 * **cold raw**: retrieved when the prompt's raw confidence c > tau;
 * **cold + M**: retrieved when the Mondrian isotonic recalibration of c (the calibrator the
-  operators use, :class:`~sgbelief.calibration.mondrian.MondrianCalibrator`, slices (context, Q) ->
-  Q -> global) gives p_hat > tau. It is fitted on the *verifiable* outcomes: the geometric
+  operators use, :class:`~sgbelief.calibration.mondrian.MondrianCalibrator`, at their finest level:
+  one slice per (model, Q)) gives p_hat > tau. ``calibrated_probability`` reads the finest fitted
+  slice, so the coarser levels of the operators' hierarchy would only be read for a compound with
+  no verifiable outcome outside a fold, which then stays raw (c itself); leaving them out gives the
+  same numbers five times faster. It is fitted on the *verifiable* outcomes: the geometric
   channel's label of the element in the crop's frame decides the object part (the vocabulary's
   outcome, as for a component claim), the map geometry the relations; an undecided label gives no
   outcome. Cross-fitted over ``folds`` = 10 folds of elements: an element's answers are
@@ -31,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from sgbelief.calibration.config import CalibrationConfig
-from sgbelief.calibration.mondrian import MondrianCalibrator
+from sgbelief.calibration.mondrian import MondrianCalibrator, by_context_and_predicate
 from sgbelief.eval.metrics import retrieval_f1
 from sgbelief.eval.sim_monolithic import MonolithicRecord
 
@@ -107,8 +110,8 @@ def cross_fitted_probabilities(
 
     ``calibrator()`` makes a fresh calibrator with ``add(context, predicate, c, y)``, ``refit_all()``
     and ``calibrated_probability(c, context, predicate)`` (default: the operators'
-    ``MondrianCalibrator()``)."""
-    make = calibrator or MondrianCalibrator
+    ``MondrianCalibrator()`` at its finest level, one slice per (context, predicate))."""
+    make = calibrator or (lambda: MondrianCalibrator(groups=(by_context_and_predicate,)))
     out = [math.nan] * len(items)
     for f in range(folds):
         members = [i for i, it in enumerate(items) if fold_of[it[0]] == f]
@@ -177,7 +180,8 @@ def compare_compounds(
             items.append((v, r.context, key, r.confidence, verifiable_outcome(vocabulary.outcome(obj, r.geometric), rel)))
     fold_of = assign_folds([it[0] for it in items], folds, seed)
     cfg = calibration or CalibrationConfig()
-    p_cal = cross_fitted_probabilities(items, fold_of, folds, calibrator=lambda: MondrianCalibrator(cfg, alpha))
+    p_cal = cross_fitted_probabilities(items, fold_of, folds, calibrator=lambda: MondrianCalibrator(
+        cfg, alpha, groups=(by_context_and_predicate,)))
     recal: dict[tuple[str, Any], float] = {(it[2], it[0]): p for it, p in zip(items, p_cal)}
     rows: list[CompoundRow] = []
     for key, (nq, pool, positives) in compound_plans.items():
@@ -386,15 +390,15 @@ def bench_section(suite: Any, data: Any, run_a: Any, run_b: Any, *, config: Any,
     from pathlib import Path
 
     from sgbelief.eval.formats import write_events
-    from sgbelief.eval.sim_monolithic import monolithic_channel
+    from sgbelief.eval.sim_monolithic import monolithic_channel, write_monolithic
 
     channel = monolithic_channel(suite)
     first, second = profiles
     recs_a = channel.records(first, "oracle")
     recs_b = channel.records(second, "oracle")
     out = Path(data_dir)
-    channel.write(out / "monolithic.jsonl", first, "oracle")
-    channel.write(out / SWAP_DIR / "monolithic.jsonl", second, "oracle")
+    write_monolithic(out / "monolithic.jsonl", recs_a)
+    write_monolithic(out / SWAP_DIR / "monolithic.jsonl", recs_b)
     write_events(out / SWAP_DIR / "events.jsonl", suite.events_for(second, "oracle"))
     ctx = suite.config.vlm.profiles
     for run in (run_a, run_b):  # the retrieval replay's graph holds every node; a bench replay only the targeted ones

@@ -33,7 +33,7 @@ import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -170,8 +170,21 @@ def _sigmoid(x: float) -> float:
     return e / (1.0 + e)
 
 
-class MonolithicRecord(BaseModel):
-    """One line of ``monolithic.jsonl``: the prompt's answer about one element and one compound."""
+class MonolithicRecord(NamedTuple):
+    """One line of ``monolithic.jsonl``: the prompt's answer about one element and one compound
+    (lightweight, like :class:`~sgbelief.eval.formats.EventRecord`; a file is validated by
+    :func:`read_monolithic` through :class:`_RecordModel`)."""
+
+    node: str
+    query: str
+    t: int
+    confidence: float
+    context: str
+    geometric: str | None
+
+
+class _RecordModel(BaseModel):
+    """The validation model of one ``monolithic.jsonl`` line (the file boundary)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
@@ -197,8 +210,7 @@ class MonolithicChannel:
         for cl in self.claims:
             d = prof.distortion(cl.predicate)
             c = round(_sigmoid(d.gain * cl.z + d.bias), _CONF_DECIMALS)
-            out.append(MonolithicRecord(node=cl.node, query=cl.query, t=cl.t, confidence=c, context=prof.context,
-                                        geometric=cl.labels.get(ch)))
+            out.append(MonolithicRecord(cl.node, cl.query, cl.t, c, prof.context, cl.labels.get(ch)))
         return out
 
     def write(self, path: str | os.PathLike[str], profile: str | None = None, channel: str | None = None) -> Path:
@@ -241,7 +253,8 @@ def monolithic_channel(suite: Any, queries: Mapping[str, NamedQuery] | None = No
 def write_monolithic(path: str | os.PathLike[str], records: Iterable[MonolithicRecord]) -> Path:
     """Write ``monolithic.jsonl`` atomically: a header line, then one record per line."""
     lines = [json.dumps({"format": MONOLITHIC_FORMAT, "version": 1}) + "\n"]
-    lines += [r.model_dump_json() + "\n" for r in records]
+    lines += [json.dumps(r._asdict(), separators=(",", ":"), allow_nan=False, ensure_ascii=False) + "\n"
+              for r in records]
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(p, lines)
@@ -279,11 +292,12 @@ def read_monolithic(path: str | os.PathLike[str]) -> list[MonolithicRecord]:
                                           f"{head.get('format')!r} version {head.get('version')!r}", path=p, line=lineno)
                     continue
             try:
-                rec = MonolithicRecord.model_validate_json(text)
+                m = _RecordModel.model_validate_json(text)
             except ValidationError as exc:
                 err = exc.errors()[0]
                 field = ".".join(str(x) for x in err["loc"]) or "(line)"
                 raise FormatError(f"field '{field}': {err['msg']}", path=p, line=lineno) from None
+            rec = MonolithicRecord(m.node, m.query, m.t, m.confidence, m.context, m.geometric)
             key = (rec.node, rec.query)
             if key in seen:
                 raise FormatError(f"node {rec.node!r}, query {rec.query!r}: answered twice", path=p, line=lineno)
