@@ -34,8 +34,7 @@ from sgbelief.eval.formats import EventRecord
 from sgbelief.eval.metrics import conformal_coverage, reliability_bins
 from sgbelief.eval.replay import OperatorRun, OperatorScores, make_runs, replay, score_run, to_event
 from sgbelief.calibration.mondrian import MondrianCalibrator
-from sgbelief.eval.compound_table import DEFAULT_CONFIG_NOTE, TABLE_OPERATOR, bench_section
-from sgbelief.eval.compound_table import render_markdown as compound_markdown
+from sgbelief.eval.compound_table import bench_section, render_markdown as compound_markdown
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES
@@ -459,13 +458,8 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
             res["retrieval"] = [sc.to_dict() for sc in evaluate_retrieval(rdata, operators, operator_config=config)]
         except Exception as exc:  # reported in the results, never silently dropped
             res["retrieval_error"] = f"{type(exc).__name__}: {exc}"
-        if "retrieval" in res and TABLE_OPERATOR in operators:  # Table 4: against the monolithic prompt
-            try:
-                note = DEFAULT_CONFIG_NOTE if config == OperatorConfig.default() else "a user configuration (meta.config)"
-                res["compound_table"] = bench_section(suite, rdata, main_runs[TABLE_OPERATOR], swap_runs[TABLE_OPERATOR],
-                                                      config=config, config_note=note, data_dir=data_dir)
-            except Exception as exc:  # reported in the results, never silently dropped
-                res["compound_table_error"] = f"{type(exc).__name__}: {exc}"
+        if "retrieval" in res:  # Table 4: against the monolithic prompt
+            res.update(bench_section(suite, rdata, main_runs, swap_runs, config=config, data_dir=data_dir))
     return res, cal_report, trace
 
 

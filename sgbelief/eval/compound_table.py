@@ -380,17 +380,32 @@ SWAP_DIR = "model_swap"
 DEFAULT_CONFIG_NOTE = "the shipped default (sgbelief/configs/operators/default.yaml)"
 
 
-def bench_section(suite: Any, data: Any, run_a: Any, run_b: Any, *, config: Any, config_note: str,
-                  data_dir: Any, profiles: tuple[str, str] = ("vlm_a", SWAP_PROFILE)) -> dict[str, Any]:
-    """Table 4 for one simulated suite inside ``sgbelief bench``: the monolithic channel of
-    ``suite`` (profile of the written data, oracle channel), the operator's replays under both
-    models (``run_a``, ``run_b``: :class:`~sgbelief.eval.replay.OperatorRun`), the swap view written
-    to ``data_dir/model_swap`` (events.jsonl, monolithic.jsonl) and the first one to
-    ``data_dir/monolithic.jsonl``, so ``sgbelief retrieval --suite data_dir`` prints the same table."""
+def bench_section(suite: Any, data: Any, runs_a: Mapping[str, Any], runs_b: Mapping[str, Any], *, config: Any,
+                  data_dir: Any, profiles: tuple[str, str] = ("vlm_a", SWAP_PROFILE),
+                  operator: str = TABLE_OPERATOR) -> dict[str, Any]:
+    """Table 4 for one simulated suite inside ``sgbelief bench``: ``{"compound_table": report}``, or
+    ``{"compound_table_error": why}`` (reported in the results, never dropped silently).
+
+    The monolithic channel of ``suite`` (the profiles' views, oracle channel) against the
+    operator's replays under both models (``runs_a`` / ``runs_b``: name -> ``OperatorRun``). The
+    first view is written to ``data_dir/monolithic.jsonl``, the second model's events and answers
+    to ``data_dir/model_swap/``, so ``sgbelief retrieval --suite data_dir`` prints the same table."""
+    if operator not in runs_a or operator not in runs_b:
+        return {"compound_table_error": f"it compares {operator!r}, which the run's operators leave out"}
+    try:
+        return {"compound_table": _bench_table(suite, data, runs_a[operator], runs_b[operator], config, data_dir,
+                                               profiles)}
+    except Exception as exc:  # reported in the results, never silently dropped
+        return {"compound_table_error": f"{type(exc).__name__}: {exc}"}
+
+
+def _bench_table(suite: Any, data: Any, run_a: Any, run_b: Any, config: Any, data_dir: Any,
+                 profiles: tuple[str, str]) -> dict[str, Any]:
     from pathlib import Path
 
     from sgbelief.eval.formats import write_events
     from sgbelief.eval.sim_monolithic import monolithic_channel, write_monolithic
+    from sgbelief.fusion.config import OperatorConfig
 
     channel = monolithic_channel(suite)
     first, second = profiles
@@ -405,11 +420,11 @@ def bench_section(suite: Any, data: Any, run_a: Any, run_b: Any, *, config: Any,
         for v in data.nodes:
             if not run.graph.has_node(v):
                 run.graph.add_node(v)
+    note = DEFAULT_CONFIG_NOTE if config == OperatorConfig.default() else "a user configuration (meta.config)"
     return suite_compound_table(
         data, ModelView(recs_a, run_a.operator, run_a.graph, ctx[first].context),
-        operator=run_a.name, config_note=config_note, tau=config.tau, calibration=config.calibration,
-        alpha=config.alpha,
-        swap=ModelView(recs_b, run_b.operator, run_b.graph, ctx[second].context))
+        operator=run_a.name, config_note=note, tau=config.tau, calibration=config.calibration,
+        alpha=config.alpha, swap=ModelView(recs_b, run_b.operator, run_b.graph, ctx[second].context))
 
 
 def suite_folder_table(path: Any, *, vocab: Any = None, queries: Any = None, operator: str = TABLE_OPERATOR,
