@@ -244,7 +244,9 @@ def test_patch_swaps_and_restores_every_binding():
             objects.append(make_detection(blob((0, 0, 0)), 1, "table", 0.6, 0))
             det = make_detection(blob((0, 0, 0)), 0, "chair", 0.9, 1, seed=1)
             objects = pipe.merge_detections_to_objects(cfg(), DetectionList([det]), objects, torch.tensor([[1.2]]))
-            assert backend.graph.evidence_count() == 2
+            # two claims (chair, table); the chair's also counts against the table (exclusive_evidence: rivals)
+            claims = [e for e in backend.graph.provenance.iter_entries() if e.verdict is None or e.verdict.is_claim]
+            assert len(claims) == 2 and backend.graph.evidence_count() == 3
             objects.get_most_common_class()
         for (modname, name), old in saved.items():
             assert getattr(__import__("sys").modules[modname], name) is old, (modname, name)

@@ -44,7 +44,7 @@ def test_the_readme_example_draws_refusals_and_explains_the_car_event_by_event(
     capsys.readouterr()
     assert main(explain) == 0
     out = capsys.readouterr().out
-    assert out.startswith(f"'{node}' {predicate}: ") and "live events (61, time order)" in out
+    assert out.startswith(f"'{node}' {predicate}: ") and "live events (67, time order)" in out
     claims = [line for line in out.splitlines() if re.match(r"^\s+\d+\s+e\d+\s", line)]
-    assert len(claims) == 40  # the default --limit, of 61
+    assert len(claims) == 40  # the default --limit, of 67
     assert sum(" ⊥ " in line for line in claims) >= 15 and "30 ⊥" in out and "  compacted (" not in out

@@ -226,14 +226,15 @@ def test_explain_shows_verdicts_and_lambda_hat_of_a_replayed_comod_map(tmp_path:
     out = capsys.readouterr().out
     # every label observed; the early claims contradicted, the later ones (calibrated: the model's
     # 0.9 on a car now denies "pedestrian") corroborated
-    assert "verdicts: 30 geometric, 18 ⊤, 12 ⊥; mean Λ̂ " in out
+    # (exclusion: the 29 is_car claims that committed count against is_pedestrian, exclusive_evidence: rivals)
+    assert "verdicts: 30 geometric, 29 exclusion, 18 ⊤, 12 ⊥; mean Λ̂ " in out
     assert "compacted (t=" in out and "mean Λ̂" in out
     assert " ⊤ " in out and " geo " in out and "e59" in out
     assert "key: v: verdict" in out and "· = not recorded" in out
     assert "Not committed: P = " in out and "30 claims, mean Λ̂ " in out
     assert main(["explain", str(tmp_path / "maps" / "comod"), "s/car", "is_pedestrian", "--json"]) == 0
     story = json.loads(capsys.readouterr().out)["stories"][0]
-    assert story["verdicts"] == {"⊤": 18, "⊥": 12, "geometric": 30} and story["n_claims"] == 30
+    assert story["verdicts"] == {"⊤": 18, "⊥": 12, "geometric": 30, "exclusion": 29} and story["n_claims"] == 30
     assert story["folded"]["verdicts"]["⊥"] > 0 and story["folded"]["mean_lambda_hat"] > 0
     claim = next(e for e in story["events"] if e["verdict"] == "⊤")
     assert claim["confidence"] is not None and claim["recorded"]

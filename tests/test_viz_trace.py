@@ -13,6 +13,7 @@ import pytest  # noqa: E402
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
+from sgbelief.graph.provenance_log import EntryVerdict
 from sgbelief.fusion.channel import FrameLabels  # noqa: E402
 from sgbelief.fusion.config import OperatorConfig  # noqa: E402
 from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator  # noqa: E402
@@ -57,20 +58,23 @@ def test_one_trace_event_per_claim_and_one_marker_per_event(name: str) -> None:
     graph, stream = _run(name, 200, 4)
     node, pred = max(graph.provenance.pairs(), key=lambda k: len(graph.provenance.entries(*k)))
     claims = [ev for ev, _ in stream if ev.predicate == pred and ev.targets.get(node, 0.0) > 0.1]
+    # claims of a rival class at the node count against this one (exclusive_evidence: rivals): one event each
+    rivals = {e.event_id for e in graph.provenance.entries(node, pred) if e.verdict is EntryVerdict.EXCLUSION}
     tr = belief_trace(graph, node, pred)
-    assert [e.event_id for e in tr.events] == [ev.id for ev in claims]
+    assert [e.event_id for e in tr.events] == [ev.id for ev, _ in stream if ev in claims or ev.id in rivals]
+    assert {e.event_id for e in tr.events if e.verdict == "exclusion"} == rivals
     refused = {e.event_id for e in graph.provenance.entries(node, pred) if e.status.value in
                ("refused", "resolved", "expired", "dismissed")}
     recorded = {e.event_id: e.verdict.symbol for e in graph.provenance.entries(node, pred)
                 if e.verdict is not None and e.verdict.is_claim}
-    assert {e.event_id: e.verdict for e in tr.events} == recorded  # the claims' recorded verdicts
+    assert {e.event_id: e.verdict for e in tr.events if e.event_id not in rivals} == recorded  # the claims' verdicts
     if name == "comod":  # only comod refuses: there ⊥ means refused (cal commits ⊥ claims)
         assert {e.event_id for e in tr.events if e.verdict == "⊥"} == refused
     if name == "comod":
         assert refused  # the stream holds contradicted claims
     fig = trace_figure(graph, node, [pred])
     try:
-        assert _markers(fig) == [len(claims)]
+        assert _markers(fig) == [len(claims) + len(rivals)]
         assert "now Beta(" in fig.axes[0].get_title(loc="left")
     finally:
         plt.close(fig)

@@ -302,7 +302,7 @@ def _num(x: float | None, spec: str) -> str:
 
 
 def _fmt_event(e: Any) -> str:
-    verdict = {"geometric": "geo"}.get(e.verdict, e.verdict) if e.verdict is not None else "·"
+    verdict = {"geometric": "geo", "exclusion": "exc"}.get(e.verdict, e.verdict) if e.verdict is not None else "·"
     counted = "" if e.counted else " (not counted)"
     corr = f", corroborated by {', '.join(e.corroborated_by)}" if e.corroborated_by else ""
     return (f"    {e.t:>7}  {str(e.event_id):<16} {verdict:<3} {_num(e.confidence, '.3f'):>5} "
@@ -348,5 +348,5 @@ def render_story(story: BeliefStory, limit: int = 40) -> list[str]:
 
 #: the key under the tables
 STORY_KEY = ("v: verdict (⊤ corroborated, ⊥ contradicted, ∅ no geometric claim, geo: the geometric label "
-          "observed as evidence); c: the event's confidence; Λ̂: calibrated likelihood ratio; w·T(v): "
-          "weight; ±: stance; · = not recorded")
+             "observed as evidence, exc: a claim of an exclusive rival class, counted against); c: the event's "
+             "confidence; Λ̂: calibrated likelihood ratio; w·T(v): weight; ±: stance; · = not recorded")

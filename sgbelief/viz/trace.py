@@ -18,6 +18,7 @@ from itertools import groupby
 from typing import Any
 
 from sgbelief.graph.belief import BetaBelief
+from sgbelief.graph.provenance_log import EntryVerdict
 from sgbelief.graph.scene_graph import SceneGraph
 from sgbelief.viz.style import REFUSED_STATUSES
 
@@ -106,7 +107,12 @@ def belief_trace(graph: SceneGraph, node: Any, predicate: str, *, level: float =
         recorded = [e.verdict.symbol for e in grp if e.verdict is not None and e.verdict.is_claim]
         bel = BetaBelief(a, b)
         lo, hi = bel.interval(level)
-        verdict = recorded[-1] if recorded else "⊥" if refused else "?"
+        if recorded:
+            verdict = recorded[-1]
+        elif any(e.verdict is EntryVerdict.EXCLUSION for e in grp):  # a claim of a rival class, against this one
+            verdict = EntryVerdict.EXCLUSION.symbol
+        else:
+            verdict = "⊥" if refused else "?"
         events.append(TraceEvent(grp[0].event_id, int(grp[0].t), status, verdict, da, db,
                                  sum(max(1, int(e.n_folded or 1)) for e in grp), bel.mean, lo, hi))
     return BeliefTrace(node, predicate, prior, tuple(events), level)

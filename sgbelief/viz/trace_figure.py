@@ -18,7 +18,8 @@ EVENT_MARKERS_GID = "trace-events"
 #: at most this many predicate panels when none is chosen (the most eventful first)
 MAX_PANELS = 6
 _VERDICT_LEGEND = {"⊥": "⊥ refused: geometry contradicts the claim", "?": "⊤ or ∅ (the saved log does not say which)",
-                   "⊤": "⊤ geometry corroborates", "∅": "∅ geometry makes no claim"}
+                   "⊤": "⊤ geometry corroborates", "∅": "∅ geometry makes no claim",
+                   "exclusion": "exclusion: a claim of a rival class, against this one"}
 
 
 def draw_belief_band(ax: Any, x: Sequence[float], mean: Sequence[float], lower: Sequence[float],
