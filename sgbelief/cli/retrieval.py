@@ -1,4 +1,5 @@
-"""``sgbelief retrieval``: compound-query retrieval F1 per operator (Table 3, full-pool columns).
+"""``sgbelief retrieval``: compound-query retrieval F1 per operator (Table 3, full-pool columns), and
+for a suite folder written by ``sgbelief bench`` Table 4: the operator against the monolithic prompt.
 
 Two sources:
   ScanNet scene folders:  --scenes DIR --events EVENTS.jsonl --vocab VOCAB
@@ -37,6 +38,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tau", type=float, default=0.5, help="retrieval threshold: retrieved when P > tau, strictly (default: %(default)s)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table (default: a table)")
     parser.add_argument("--out", metavar="FILE", default=None, help="also write the scores as JSON to FILE (default: none)")
+    parser.add_argument("--compound-operator", metavar="NAME", default="comod",
+                        help="operator compared with the monolithic compound prompt (Table 4) when a --suite folder "
+                             "holds monolithic.jsonl (default: %(default)s)")
+    parser.add_argument("--no-monolithic", action="store_true",
+                        help="skip Table 4 (the monolithic-prompt comparison) for --suite folders (default: print it)")
     parser.add_argument("--workers", type=int, default=1,
                         help="evaluate the (source, operator) cells in parallel processes (same output as serial; "
                              "default: %(default)s)")
@@ -76,11 +82,22 @@ def run(args: argparse.Namespace) -> int:
                                                               operator_config=args.operator_config,
                                                               progress=lambda _name: bar.update(1))))
     report = []
-    for name, scores in results:
+    for src, (name, scores) in zip(sources, results):
         report.append({"source": name, "tau": args.tau, "scores": [s.to_dict() for s in scores]})
         if not args.json:
             print(format_scores(scores, title=f"{name}  (tau = {args.tau})"))
             print()
+        if src.kind == "suite" and not args.no_monolithic:
+            from sgbelief.eval.compound_table import format_text, suite_folder_table
+
+            table4 = suite_folder_table(src.path, vocab=args.vocab, queries=args.queries, operator=args.compound_operator,
+                                        operator_config=args.operator_config, tau=args.tau)
+            if table4 is not None:
+                report[-1]["compound_table"] = table4
+                if not args.json:
+                    print(format_text(table4, title=f"{name}: component beliefs against one monolithic compound "
+                                                    f"prompt (Table 4)"))
+                    print()
     if args.json:
         json.dump(report, sys.stdout, indent=2)
         sys.stdout.write("\n")

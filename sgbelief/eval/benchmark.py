@@ -34,6 +34,7 @@ from sgbelief.eval.formats import EventRecord
 from sgbelief.eval.metrics import conformal_coverage, reliability_bins
 from sgbelief.eval.replay import OperatorRun, OperatorScores, make_runs, replay, score_run, to_event
 from sgbelief.calibration.mondrian import MondrianCalibrator
+from sgbelief.eval.compound_table import bench_section, render_markdown as compound_markdown
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES
@@ -451,7 +452,7 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
         trace["rule"] = TRACE_RULE
         res["trace"] = {k2: v for k2, v in trace.items() if k2 != "trace"}
     if job.retrieval:
-        progress(f"{name}: compound-query retrieval")
+        progress(f"{name}: compound-query retrieval, monolithic prompt")
         try:
             from sgbelief.eval.retrieval import evaluate_retrieval, suite_retrieval_data
 
@@ -459,6 +460,8 @@ def _bench_suite(job: _SuiteJob, progress: Progress = _noop) -> tuple[dict[str, 
             res["retrieval"] = [sc.to_dict() for sc in evaluate_retrieval(rdata, operators, operator_config=config)]
         except Exception as exc:  # reported in the results, never silently dropped
             res["retrieval_error"] = f"{type(exc).__name__}: {exc}"
+        if "retrieval" in res:  # Table 4: against the monolithic prompt
+            res.update(bench_section(suite, rdata, main_runs, swap_runs, config=config, data_dir=data_dir))
     return res, cal_report, trace
 
 
@@ -583,6 +586,11 @@ def render_markdown(results: dict[str, Any]) -> str:
                 lines.append("\nn/a: a compound with no positives in its pool has no F1.")
         elif "retrieval_error" in res:
             lines += ["", f"Retrieval table not produced: {res['retrieval_error']}"]
+        if "compound_table" in res:
+            lines += [""] + compound_markdown(res["compound_table"], "### Compound retrieval: component beliefs against "
+                                                                    "one monolithic compound prompt (Table 4 layout)")
+        elif "compound_table_error" in res:
+            lines += ["", f"Table 4 not produced: {res['compound_table_error']}"]
         lines.append("")
     if "real_calibration" in results:
         lines += ["## Real detector confidences (COCO val, netcal records; per-class isotonic, 50/50 split by image)", "",

@@ -40,7 +40,8 @@ from sgbelief.query.relations import DEFAULT_REGISTRY, RelationConfig, RelationR
 
 __all__ = ["RetrievalData", "CompoundScore", "evaluate_retrieval", "scannet_retrieval_data",
            "suite_retrieval_data", "format_scores", "RetrievalSource", "RetrievalJob", "run_retrieval_job",
-           "evaluate_sources"]
+           "evaluate_sources", "retrieval_plans", "retrieved_sets", "replay_operator",
+           "recorded_channel_factory"]
 
 
 @dataclass
@@ -149,21 +150,33 @@ def _ground_truth_plans(data: RetrievalData, registry: RelationRegistry, gt_conf
     return geo_values, plans
 
 
-def _score_operator(data: RetrievalData, op_name: Any, plans: _Plans, *, tau: float, operator_config: Any,
-                    registry: RelationRegistry, gt_config: RelationConfig) -> list[CompoundScore]:
-    """Replay the events through one operator on a fresh graph and score every compound."""
-    geo_values, compound_plans = plans
+def retrieval_plans(data: RetrievalData, registry: RelationRegistry | None = None) -> _Plans:
+    """``(geometric values, {query: (named query, pool, positives)})``: the pools and ground truth
+    every operator is scored on (see the module docstring)."""
+    return _ground_truth_plans(data, registry or DEFAULT_REGISTRY, replace(data.config, use_committed_labels=False))
+
+
+def replay_operator(data: RetrievalData, op_name: Any, operator_config: Any = None) -> tuple[Any, SceneGraph]:
+    """``(operator, graph)`` after replaying the events through one operator on a fresh graph."""
     graph = _build_graph(data.nodes, data.vocabulary)
     op = make_operator(op_name, operator_config, data.vocabulary)
     channel = data.channel_factory()
     for i, rec in enumerate(data.events):
         op.update(graph, _event_obj(rec, i), channel)
-    engine = QueryEngine(graph, registry=registry, config=gt_config, tau=tau, require_evidence=False,
-                         probability=lambda n, p, _op=op, _g=graph: _op.probability(_g, n, p))
+    return op, graph
+
+
+def retrieved_sets(data: RetrievalData, op: Any, graph: Any, plans: _Plans, *, tau: float = 0.5,
+                   registry: RelationRegistry | None = None) -> dict[str, set[Any]]:
+    """Per compound, the pool nodes with ``P(compound) > tau`` under ``op``'s beliefs on ``graph``."""
+    geo_values, compound_plans = plans
+    gt_config = replace(data.config, use_committed_labels=False)
+    engine = QueryEngine(graph, registry=registry or DEFAULT_REGISTRY, config=gt_config, tau=tau,
+                         require_evidence=False, probability=lambda n, p, _op=op, _g=graph: _op.probability(_g, n, p))
     for name, vals in geo_values.items():
         engine.preload_geometric(name, vals)
-    scores: list[CompoundScore] = []
-    for key, (nq, pool, positives) in compound_plans.items():
+    out: dict[str, set[Any]] = {}
+    for key, (nq, pool, _positives) in compound_plans.items():
         compound, kinds = nq.compound, {lit.name: (BELIEF if lit in nq.belief else GEOMETRIC)
                                         for lit in nq.compound.literals}
         retrieved = set()
@@ -171,6 +184,19 @@ def _score_operator(data: RetrievalData, op_name: Any, plans: _Plans, *, tau: fl
             m = engine.score(node, compound, kinds, prune=True, tau=tau)
             if m is not None and m.retrieved:
                 retrieved.add(node)
+        out[key] = retrieved
+    return out
+
+
+def _score_operator(data: RetrievalData, op_name: Any, plans: _Plans, *, tau: float, operator_config: Any,
+                    registry: RelationRegistry, gt_config: RelationConfig) -> list[CompoundScore]:
+    """Replay the events through one operator on a fresh graph and score every compound."""
+    _geo_values, compound_plans = plans
+    op, graph = replay_operator(data, op_name, operator_config)
+    found = retrieved_sets(replace(data, config=gt_config), op, graph, plans, tau=tau, registry=registry)
+    scores: list[CompoundScore] = []
+    for key, (nq, pool, positives) in compound_plans.items():
+        retrieved = found[key]
         s = retrieval_f1(retrieved, positives)
         n = len(pool)
         scores.append(CompoundScore(key, nq.title, nq.group, op_name if isinstance(op_name, str) else op.name,
@@ -374,6 +400,11 @@ class _CachedChannel:
         if node not in self._cache:
             self._cache[node] = self.inner.label(node, t)
         return self._cache[node]
+
+
+def recorded_channel_factory(recs: Sequence[Any]) -> Callable[[], Any]:
+    """A factory of fresh geometric channels replaying the events' recorded ``geometric`` labels."""
+    return _recorded_factory(recs)
 
 
 def _recorded_factory(recs: Sequence[Any]) -> Callable[[], Any]:

@@ -23,6 +23,7 @@ __all__ = [
     "Profile",
     "load_sim_config",
     "load_vocabulary",
+    "Monolithic",
 ]
 
 
@@ -165,6 +166,25 @@ class Vlm(_M):
         return self.latent.get(predicate, self.default)
 
 
+class Monolithic(_M):
+    """The cold monolithic compound prompt ("is this a parked car near a crossing?"), asked once per
+    visible element and named compound (docs/simulation.md, "Monolithic compound channel").
+
+    The object part is read with the VLM-typed predicate's own latent model (``vlm.latent``) and
+    the element's own persistent offset; each relation is read from the crop with ``relation``
+    (``null``: ``vlm.default``, the model's reliability on a predicate with no spec of its own),
+    or a row of ``relations``. Nothing here is fitted to a retrieval result."""
+
+    queries: str | None = Field(default=None, description="named-query set (scannet | kitti360 | YAML); "
+                                                          "null: the vocabulary's")
+    relation: LatentSpec | None = Field(default=None, description="latent model of a relation read from the "
+                                                                  "image; null: vlm.default")
+    relations: dict[str, LatentSpec] = Field(default_factory=dict, description="per-relation overrides")
+
+    def relation_spec(self, name: str, vlm: Vlm) -> LatentSpec:
+        return self.relations.get(name) or self.relation or vlm.default
+
+
 class SimConfig(_M):
     """A simulated suite (outdoor KITTI-360-like or indoor ScanNet-like)."""
 
@@ -190,6 +210,7 @@ class SimConfig(_M):
     fm_source: Literal["parametric", "detector_records"] = "parametric"
     detector_records: str = "rfcn-resnet-101-iou-0.60"
     scale: float = Field(default=1.0, gt=0, description="multiplies densities (outdoor) / scene frames")
+    monolithic: Monolithic = Field(default_factory=Monolithic, description="the cold monolithic compound prompt")
 
     @model_validator(mode="after")
     def _consistency(self) -> SimConfig:

@@ -45,7 +45,7 @@ from sgbelief.eval.sim_world import (
     project_boxes,
 )
 
-__all__ = ["SimulatedSuite", "Claim", "simulate", "load_sim_config", "suite_statistics", "most_contradicted",
+__all__ = ["SimulatedSuite", "Claim", "View", "simulate", "load_sim_config", "suite_statistics", "most_contradicted",
            "CHANNELS"]
 
 CHANNELS = ("oracle", "segmenter")
@@ -67,6 +67,15 @@ class Claim:
     geometric: dict[str, dict[str, str | None]]  # channel -> {node: label or None}
 
 
+@dataclass(frozen=True)
+class View:
+    """An element's largest unoccluded in-view frame: the crop a whole-image prompt reads."""
+
+    t: int
+    area_px: float
+    labels: dict[str, str | None]  # geometric channel -> label of the element at t
+
+
 @dataclass
 class SimulatedSuite:
     """The output of :func:`simulate`: claims (any profile / channel view), truth and node geometry."""
@@ -79,6 +88,10 @@ class SimulatedSuite:
     truth: dict[str, dict[str, int]]
     nodes: NodesFile
     stats: dict[str, Any] = field(default_factory=dict)
+    #: node -> its largest unoccluded view (elements never seen unoccluded are absent)
+    views: dict[str, View] = field(default_factory=dict)
+    #: the persistent latent offset u_{v,phi} of every (node, predicate) the VLM was asked about
+    offsets: dict[tuple[str, str], float] = field(default_factory=dict)
     _cache: dict[tuple[str, str], list[EventRecord]] = field(default_factory=dict, repr=False)
 
     @property
@@ -215,6 +228,8 @@ def simulate(
     hall_p /= hall_p.sum()
 
     claims: list[Claim] = []
+    views: dict[str, View] = {}
+    element_offsets: dict[tuple[str, str], float] = {}
     truth: dict[str, dict[str, int]] = {}
     node_infos: dict[str, NodeInfo] = {}
     scene_infos: dict[str, SceneInfo] = {}
@@ -304,6 +319,9 @@ def simulate(
                     r = (u_seg[j, 2] - spec.accuracy) / max(1.0 - spec.accuracy, 1e-12)
                     s_lab = keys[min(int(np.searchsorted(cum, r, side="right")), len(keys) - 1)]
                 seg_lab[i] = s_lab
+                area = float((vb[j, 2] - vb[j, 0]) * (vb[j, 3] - vb[j, 1]))
+                if ids[i] not in views or area > views[ids[i]].area_px:
+                    views[ids[i]] = View(t, area, {"oracle": oracle_lab[i], "segmenter": s_lab})
                 if lab not in unlabeled:
                     seg_true.append(lab)
                     seg_pred.append(s_lab)
@@ -398,6 +416,7 @@ def simulate(
                                     geometric={"oracle": geo_o, "segmenter": geo_s}))
                 counters["flip"] += int(flip)
 
+        element_offsets.update({(ids[i], p): u for (i, p), u in offsets.items() if i >= 0})
         # nodes, truth
         _scene_nodes(cfg, world, t0, ids, seen_first, seen_last, depths, drive_dir, tracks, node_infos)
         for i in range(n):
@@ -419,7 +438,8 @@ def simulate(
                       "facing_distance_m": ind.facing_distance_m, "facing_half_angle_deg": ind.facing_half_angle_deg}
     nodes = NodesFile(suite=cfg.name, scenes=scene_infos, nodes=node_infos, geometric_thresholds=thresholds)
     miou, per_class = segmentation_iou(seg_true, seg_pred)
-    suite = SimulatedSuite(config=cfg, seed=seed, profile=prof, channel=ch, claims=claims, truth=truth, nodes=nodes)
+    suite = SimulatedSuite(config=cfg, seed=seed, profile=prof, channel=ch, claims=claims, truth=truth, nodes=nodes,
+                           views=views, offsets=element_offsets)
     suite.stats = {
         "suite": cfg.name, "seed": seed, "fm_source": cfg.fm_source,
         "events": len(claims), "nodes": len(truth), "scenes": len(cfg.scenes),
