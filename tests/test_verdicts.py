@@ -68,7 +68,7 @@ def test_every_calibrated_entry_records_its_verdict_and_confidence(name: str, en
     n_geo = 0
     for report in reports:
         entries = prov.event_entries(report.event_id)
-        claims = {e.node: e for e in entries if e.verdict is not EntryVerdict.GEOMETRIC}
+        claims = {e.node: e for e in entries if e.verdict is not None and e.verdict.is_claim}  # not observations
         n_geo += sum(e.verdict is EntryVerdict.GEOMETRIC for e in entries)
         for e in entries:
             assert e.confidence == confidence[report.event_id] and type(e.confidence) is float
