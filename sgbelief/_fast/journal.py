@@ -38,6 +38,7 @@ from sgbelief._fast.folds import (
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA
 from sgbelief.graph.provenance import (
     COUNTED,
+    EntryRecord,
     EntryStatus,
     EntryVerdict,
     PairKey,
@@ -198,23 +199,10 @@ class JournalledProvenanceStore(ProvenanceStore):
             self.materialize()
         return ProvenanceStore.iter_entries(self)
 
-    def record(
-        self,
-        node: Any,
-        predicate: str,
-        event_id: str | None,
-        t: int,
-        d_alpha: float,
-        d_beta: float,
-        status: EntryStatus = _COMMITTED,
-        stance: int = 0,
-        verdict: EntryVerdict | None = None,
-        confidence: float | None = None,
-    ) -> ProvenanceEntry:
+    def append(self, record: EntryRecord) -> ProvenanceEntry:
         if self._journal:  # keep arrival order: journal records come first
             self.materialize()
-        return ProvenanceStore.record(self, node, predicate, event_id, t, d_alpha, d_beta, status, stance, verdict,
-                                      confidence)
+        return ProvenanceStore.append(self, record)
 
     def transition(self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0) -> None:
         if self._journal and entry.status in COUNTED and status not in COUNTED:

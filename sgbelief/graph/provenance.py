@@ -40,6 +40,7 @@ from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA, BetaBelief
 from sgbelief.graph.provenance_log import (
     COUNTED,
     PENDING,
+    EntryRecord,
     EntryStatus,
     EntryVerdict,
     FoldSummary,
@@ -63,7 +64,7 @@ PairKey = tuple[Any, str]
 
 
 __all__ = [
-    "COUNTED", "PENDING", "EntryStatus", "EntryVerdict", "FoldSummary", "Node", "PairKey", "PairLog",
+    "COUNTED", "PENDING", "EntryRecord", "EntryStatus", "EntryVerdict", "FoldSummary", "Node", "PairKey", "PairLog",
     "ProvenanceEntry", "ProvenanceStore", "belief_from_entries", "event_list", "fold_into_bucket",
     "index_event", "merge_into_bucket", "settled_before"
 ]
@@ -229,22 +230,10 @@ class ProvenanceStore:
         return False
 
     # ------------------------------------------------------------------ writes
-    def record(
-        self,
-        node: Any,
-        predicate: str,
-        event_id: str | None,
-        t: int,
-        d_alpha: float,
-        d_beta: float,
-        status: EntryStatus = EntryStatus.COMMITTED,
-        stance: int = 0,
-        verdict: EntryVerdict | None = None,
-        confidence: float | None = None,
-    ) -> ProvenanceEntry:
-        """Append an entry; counted statuses update the belief, pending ones join their queue.
-        ``verdict`` and ``confidence``: what the operator knew when it wrote the entry (None:
-        nothing, e.g. a baseline)."""
+    def append(self, record: EntryRecord) -> ProvenanceEntry:
+        """Append an entry (:class:`EntryRecord`); counted statuses update the belief, pending
+        ones join their queue. Returns the entry (a live object: change it through the store)."""
+        node, predicate, event_id, t, d_alpha, d_beta, status, stance, verdict, confidence = record
         key = (node, predicate)
         log = self._pairs.get(key)
         if log is None:
@@ -261,13 +250,32 @@ class ProvenanceStore:
         self._timeline.append(entry)
         return entry
 
+    def record(
+        self,
+        node: Any,
+        predicate: str,
+        event_id: str | None,
+        t: int,
+        d_alpha: float,
+        d_beta: float,
+        status: EntryStatus = EntryStatus.COMMITTED,
+        stance: int = 0,
+        verdict: EntryVerdict | None = None,
+        confidence: float | None = None,
+    ) -> ProvenanceEntry:
+        """:meth:`append` of the :class:`EntryRecord` with these fields (a shorthand for tests
+        and scripts; library code builds the record by keyword)."""
+        return self.append(EntryRecord(node, predicate, event_id, t, d_alpha, d_beta, status, stance, verdict,
+                                       confidence))
+
     def commit(
         self, node: Any, predicate: str, event_id: str | None, t: int, d_alpha: float, d_beta: float, stance: int = 0,
         verdict: EntryVerdict | None = None, confidence: float | None = None,
     ) -> None:
-        """Record a committed increment (Eq. 3): ``record(..., COMMITTED, stance, verdict,
-        confidence)`` without returning the entry (so a store is free to build the entry later)."""
-        self.record(node, predicate, event_id, t, d_alpha, d_beta, _COMMITTED, stance, verdict, confidence)
+        """Append a committed increment (Eq. 3) without returning the entry (so a store is free
+        to build the entry later): the operators' hot path, positional for speed."""
+        self.append(EntryRecord(node, predicate, event_id, t, d_alpha, d_beta, _COMMITTED, stance, verdict,
+                                confidence))
 
     def transition(self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0) -> None:
         """Move an entry to a new status; ``scale`` multiplies its increments (w/k on timeout).

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from enum import Enum, IntEnum
-from typing import Any
+from typing import Any, NamedTuple
 
 
 class EntryStatus(str, Enum):
@@ -200,6 +200,28 @@ class ProvenanceEntry:
             f"predicate={self.predicate!r}, verdict={None if self.verdict is None else self.verdict.symbol}, "
             f"confidence={self.confidence!r})"
         )
+
+
+class EntryRecord(NamedTuple):
+    """The fields of one new log entry, built by keyword and handed to a store
+    (``store.append(EntryRecord(node=v, predicate=phi, event_id=..., t=..., d_alpha=...,
+    d_beta=..., status=..., stance=..., verdict=..., confidence=...))``); the store makes the
+    :class:`ProvenanceEntry` (which then changes only through the store)."""
+
+    node: Any
+    predicate: str
+    event_id: str | None
+    t: int
+    d_alpha: float
+    d_beta: float
+    #: the entry's status: counted ones change the belief, pending ones join their queue
+    status: EntryStatus = EntryStatus.COMMITTED
+    #: +1 when the evidence supports the predicate, -1 when it denies it, 0 neutral
+    stance: int = 0
+    #: what the channel said when the operator wrote the entry (None: no verdict, e.g. a baseline)
+    verdict: EntryVerdict | None = None
+    #: the event's raw confidence c (None: not recorded)
+    confidence: float | None = None
 
 
 class FoldSummary:
