@@ -204,10 +204,12 @@ class JournalledProvenanceStore(ProvenanceStore):
             self.materialize()
         return ProvenanceStore.append(self, record)
 
-    def transition(self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0) -> None:
+    def transition(
+        self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0, corroborated_by: str | None = None
+    ) -> None:
         if self._journal and entry.status in COUNTED and status not in COUNTED:
             self.materialize()  # the belief is recomputed from the whole log
-        ProvenanceStore.transition(self, entry, status, scale=scale)
+        ProvenanceStore.transition(self, entry, status, scale=scale, corroborated_by=corroborated_by)
 
     def retract(self, event_id: str, *, cascade_window: int | None = None) -> list[str]:
         if self._journal:

@@ -277,8 +277,12 @@ class ProvenanceStore:
         self.append(EntryRecord(node, predicate, event_id, t, d_alpha, d_beta, _COMMITTED, stance, verdict,
                                 confidence))
 
-    def transition(self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0) -> None:
-        """Move an entry to a new status; ``scale`` multiplies its increments (w/k on timeout).
+    def transition(
+        self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0, corroborated_by: str | None = None
+    ) -> None:
+        """Move an entry to a new status; ``scale`` multiplies its increments (w/k on timeout);
+        ``corroborated_by``: the event whose corroboration moves it (added to the entry's
+        ``corroborated_by``, so that retracting the entry's event cascades to it).
 
         The belief changes exactly when the entry starts (or stops) being counted.
         """
@@ -303,6 +307,8 @@ class ProvenanceStore:
             self._add_pending((entry.node, entry.predicate), entry)
         if was_counted and not counted:
             self._refresh(log)
+        if corroborated_by is not None:
+            entry.corroborated_by = [*(entry.corroborated_by or ()), corroborated_by]
 
     def _refresh(self, log: PairLog) -> None:
         """Recompute a pair's running belief from its log (Eq. 4)."""
