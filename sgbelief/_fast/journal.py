@@ -27,14 +27,8 @@ from itertools import islice
 from operator import eq, le
 from typing import Any, Protocol
 
-from sgbelief._fast.folds import (
-    JournalRecord,
-    fold_journal_records,
-    fold_with_journal,
-    old_prefix_length,
-    record_event_id,
-    record_t,
-)
+from sgbelief._fast.folds import JournalRecord, fold_journal_records, fold_with_journal, record_event_id, record_t
+from sgbelief.graph.compaction import old_prefix_length
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA
 from sgbelief.graph.provenance import (
     COUNTED,

@@ -37,26 +37,28 @@ from typing import Any
 
 from sgbelief.errors import FormatError, RetractionError
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA, BetaBelief
+from sgbelief.graph.compaction import (
+    FoldSummary,
+    attach_summary,
+    bucket_summary,
+    fold_into_bucket,
+    merge_into_bucket,
+    settled_before,
+    take_old,
+)
 from sgbelief.graph.provenance_log import (
     COUNTED,
     PENDING,
     EntryRecord,
     EntryStatus,
     EntryVerdict,
-    FoldSummary,
     PairLog,
     ProvenanceEntry,
-    attach_summary,
     belief_from_entries,
-    bucket_summary,
     entry_extras,
     entry_row,
     event_list,
-    fold_into_bucket,
     index_event,
-    merge_into_bucket,
-    merged_summary,
-    settled_before,
 )
 
 Node = Hashable
@@ -406,14 +408,6 @@ class ProvenanceStore:
         return ids
 
     # ------------------------------------------------------------- compaction
-    def _take_old(self, before_t: int) -> list[ProvenanceEntry]:
-        """Pop the timeline's prefix up to its first live entry with ``t >= before_t``."""
-        timeline = self._timeline
-        old: list[ProvenanceEntry] = []
-        while timeline and (timeline[0].t < before_t or not timeline[0].alive):
-            old.append(timeline.popleft())
-        return old
-
     def compact(self, before_t: int) -> int:
         """Fold every settled entry with ``t < before_t`` into one equivalent increment per pair
         (:func:`fold_into_bucket`); returns the number of entries folded.
@@ -428,7 +422,7 @@ class ProvenanceStore:
         pass. Dead entries (retracted) hold nothing back, so a loaded copy, which no longer holds
         them, folds the same entries.
         """
-        old = self._take_old(before_t)
+        old = take_old(self._timeline, before_t)
         folded = 0
         retired: list[str] = []
         for key in dict.fromkeys([(e.node, e.predicate) for e in old if e.alive]):
@@ -486,11 +480,8 @@ class ProvenanceStore:
             if len(buckets) > 1:
                 head = buckets[0]
                 for extra in buckets[1:]:
-                    head.d_alpha = math.fsum((head.d_alpha, extra.d_alpha))
-                    head.d_beta = math.fsum((head.d_beta, extra.d_beta))
-                    head.n_folded += extra.n_folded
-                    head.summary = merged_summary(head, extra)
-                    head.t = max(head.t, extra.t)
+                    merge_into_bucket(head, keep, key[1], extra.t, extra.d_alpha, extra.d_beta, extra.n_folded,
+                                      extra.summary)
                     extra.alive = False
                 merged = [e for e in merged if e.alive]
                 merged.remove(head)
