@@ -47,7 +47,7 @@ from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.operators.compaction import CompactionSchedule
 from sgbelief.fusion.protocol import FusionOperator, LinearRule, PairRule, ResetRule, increment_stance, new_stats
-from sgbelief.fusion.registry import make_operator
+from sgbelief.fusion.registry import make_reference_operator
 from sgbelief._fast.journal import add_logs, extend_timeline, remember_compacted_ids, set_event_index
 from sgbelief.graph.compaction import FoldSummary, merge_into_bucket
 from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore
@@ -423,7 +423,7 @@ def _install(prov: ProvenanceStore, keys: list[tuple[Any, str]], alpha: list[flo
 def _resolve(operator: FusionOperator | str, config: OperatorConfig | dict[str, Any] | None) -> FusionOperator:
     """The operator to replay: an instance as given, or a fresh one of that name with ``config``."""
     if isinstance(operator, str):
-        return make_operator(operator, config)
+        return make_reference_operator(operator, config)
     if config is not None:
         raise ValueError("batched replay: give config= only with an operator name (an operator has its own)")
     return operator
