@@ -17,10 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from enum import Enum, IntEnum
-from typing import TYPE_CHECKING, Any, NamedTuple
-
-if TYPE_CHECKING:  # pragma: no cover
-    from sgbelief.graph.compaction import FoldSummary
+from typing import Any, NamedTuple
 
 
 class EntryStatus(str, Enum):
@@ -164,8 +161,9 @@ class ProvenanceEntry:
         self.n_folded = 1
         #: False once retracted or folded away
         self.alive = True
-        #: for a compacted bucket, what it folded (:class:`FoldSummary`); None otherwise, or unknown
-        self.summary: FoldSummary | None = None
+        #: for a compacted bucket, what it folded (a :class:`~sgbelief.graph.compaction.FoldSummary`,
+        #: which compaction, one module up, writes); None otherwise, or unknown
+        self.summary: Any = None
         #: the verdict when the operator wrote the entry (None: the operator has none, or not recorded)
         self.verdict = verdict
         #: the event's raw confidence c (None: not recorded)
