@@ -183,7 +183,7 @@ def test_calibrator_buffer_is_bounded_by_buffer_size(store) -> None:
     for key in (("k", "p"), ("*", "p"), ("*", "*")):
         s = cal.slices[key]
         assert s.n == 256 and s.n_seen == 5000
-        assert len(s.fc) == len(s.sx0) + len(s.sx1) == s.conformal.n_sorted == 256
+        assert len(s.window_confidences) == len(s.sorted_negatives) + len(s.sorted_positives) == s.conformal.n_sorted == 256
     assert cal.n_outcomes() == 256 and cal.n_outcomes(seen=True) == 5000
     lam, kappa = cal.likelihood_ratio(0.7, "k", "p")
     assert math.isfinite(lam) and lam > 0 and kappa == 1.0
@@ -229,7 +229,7 @@ def test_batches_larger_than_the_window_equal_a_fresh_fit_on_the_tail(capacity: 
     fresh.refit()
     assert s.n == s.n_fit == capacity and s.n_seen == 2000
     assert (s.kx, s.ky, s.base_rate, s.n_pos) == (fresh.kx, fresh.ky, fresh.base_rate, fresh.n_pos)
-    assert list(s.fc) == c[-capacity:].tolist() and list(s.conformal.fifo) == [
+    assert list(s.window_confidences) == c[-capacity:].tolist() and list(s.conformal.fifo) == [
         nonconformity(ci, yi) for ci, yi in zip(c[-capacity:].tolist(), y[-capacity:].tolist())
     ]
     assert list(s.conformal.sorted) == list(fresh.conformal.sorted) and s.conformal.n_sorted == capacity
@@ -512,7 +512,7 @@ def test_the_old_modules_re_export_with_a_deprecation_warning() -> None:
         (old_conf, "nonconformity", conformal.nonconformity),
         (old_conf, "ConformalSlice", conformal.ConformalSlice),
     ]:
-        with pytest.warns(DeprecationWarning, match=f"import {name} from sgbelief.calibration"):
+        with pytest.warns(DeprecationWarning, match=f"removed in sgbelief 0.2.0.*import {name} from sgbelief.calibration"):
             assert getattr(module, name) is new
     with pytest.raises(AttributeError):
         old_cal.no_such_name  # noqa: B018

@@ -270,9 +270,9 @@ class ReleasingOperator:
     name = "releasing"
 
     def __init__(self, node, predicate, at):
-        from sgbelief.fusion.registry import make_operator
+        from sgbelief.fusion.registry import make_reference_operator
 
-        self.inner = make_operator("majority")
+        self.inner = make_reference_operator("majority")
         self.held = (node, predicate, at)
 
     def update(self, graph, event, channel=None):

@@ -78,7 +78,7 @@ def test_the_engine_is_chosen_explicitly() -> None:
     from sgbelief.api.operators import make_operator
     from sgbelief.fusion.operators import CoModulatedOperator, MajorityVoteOperator
     from sgbelief.fusion.operators.base import REFERENCE
-    from sgbelief.fusion.registry import make_operator as reference_operator
+    from sgbelief.fusion.registry import make_reference_operator as reference_operator
 
     assert make_operator("comod").engine is FUSED_CALIBRATED  # the public default
     assert make_operator("majority").engine is FUSED_BASELINES
@@ -92,6 +92,20 @@ def test_the_engine_is_chosen_explicitly() -> None:
         make_operator("comod", engine="turbo")  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="apply"):
         MajorityVoteOperator(engine=object())  # type: ignore[arg-type]
+
+
+def test_the_reference_builder_has_its_own_name_and_the_old_one_warns() -> None:
+    import sgbelief.fusion as fusion
+    import sgbelief.fusion.registry as registry
+    from sgbelief.errors import SgbeliefDeprecationWarning
+
+    assert fusion.make_reference_operator is registry.make_reference_operator
+    assert "make_operator" not in fusion.__all__
+    for module in (fusion, registry):
+        with pytest.warns(SgbeliefDeprecationWarning, match="removed in sgbelief 0.2.0.*make_reference_operator"):
+            assert module.make_operator is registry.make_reference_operator
+    with pytest.raises(AttributeError):
+        registry.no_such_name  # noqa: B018
 
 
 def test_the_fusion_layer_never_imports_the_fast_engines() -> None:

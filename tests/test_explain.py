@@ -15,7 +15,8 @@ from sgbelief.api.scene_graph import SceneGraph
 from sgbelief.cli import main
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.config import OperatorConfig
-from sgbelief.graph.provenance_log import UNKNOWN_STATUS, EntryStatus
+from sgbelief.graph.compaction import UNKNOWN_STATUS
+from sgbelief.graph.provenance_log import EntryStatus
 from sgbelief.graph.story import NOT_RECORDED_OLD
 from sgbelief.testing import conformance_table, random_stream
 

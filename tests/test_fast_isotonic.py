@@ -137,8 +137,8 @@ def test_fit_is_bit_identical_to_scikit_learn_on_both_paths(small: bool) -> None
             s.refit()
             assert (s.kx, s.ky) == _sklearn_knots(c, y)
             assert type(s.store.ux) is (list if small else np.ndarray)
-            np.testing.assert_array_equal(s.sx0, np.sort(c[y == 0]))
-            np.testing.assert_array_equal(s.sx1, np.sort(c[y == 1]))
+            np.testing.assert_array_equal(s.sorted_negatives, np.sort(c[y == 0]))
+            np.testing.assert_array_equal(s.sorted_positives, np.sort(c[y == 1]))
             assert s.n == s.n_fit == n and s.n_pos == y.sum() and s.base_rate == y.sum() / n
 
 
@@ -163,7 +163,8 @@ def test_small_and_numpy_paths_and_lazy_fits_agree(capacity: int | None) -> None
                     s.refit()
                     if read_every or i > n - 40:
                         states.append((s.kx, s.ky, s.base_rate, s.log_prior_odds, s.n, s.n_pos, s.n_seen,
-                                       s.sx0.tolist(), s.sx1.tolist(), list(s.fc), list(s.fy), list(s.conformal.sorted)))
+                                       s.sorted_negatives.tolist(), s.sorted_positives.tolist(), list(s.window_confidences),
+                                       list(s.window_labels), list(s.conformal.sorted)))
         return states
 
     ref = run(RefitIsotonic, 0, True, 8)

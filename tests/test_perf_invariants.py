@@ -51,8 +51,9 @@ def test_calibration_refits_logarithmic_and_buffer_sorted() -> None:
             fits, last = fits + 1, s.n_fit
     assert fits < 120
     s = cal.slices[("k", "p")]
-    assert (s.sx0[1:] >= s.sx0[:-1]).all() and (s.sx1[1:] >= s.sx1[:-1]).all()
-    assert len(s.sx0) + len(s.sx1) + len(s.c) == s.n
+    assert (s.sorted_negatives[1:] >= s.sorted_negatives[:-1]).all()
+    assert (s.sorted_positives[1:] >= s.sorted_positives[:-1]).all()
+    assert len(s.sorted_negatives) + len(s.sorted_positives) + len(s.c) == s.n
 
 
 @settings(max_examples=300, deadline=None)

@@ -24,8 +24,8 @@ from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.protocol import Action
 from sgbelief.fusion.rules import ENTRY_VERDICT, claim_increments, claim_lambda_hat, claim_weight
+from sgbelief.graph.compaction import FoldSummary
 from sgbelief.graph.provenance import EntryStatus, EntryVerdict, ProvenanceStore
-from sgbelief.graph.provenance_log import FoldSummary
 from sgbelief.testing import conformance_table, random_stream, store_state
 
 TABLE = conformance_table()

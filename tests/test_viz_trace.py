@@ -16,7 +16,7 @@ from hypothesis import strategies as st  # noqa: E402
 from sgbelief.graph.provenance_log import EntryVerdict
 from sgbelief.fusion.channel import FrameLabels  # noqa: E402
 from sgbelief.fusion.config import OperatorConfig  # noqa: E402
-from sgbelief.fusion.registry import OPERATOR_NAMES, make_operator  # noqa: E402
+from sgbelief.fusion.registry import OPERATOR_NAMES, make_reference_operator  # noqa: E402
 from sgbelief.api.scene_graph import SceneGraph  # noqa: E402
 from sgbelief.testing import conformance_table, random_stream  # noqa: E402
 from sgbelief.viz.trace import belief_trace  # noqa: E402
@@ -27,7 +27,7 @@ TABLE = conformance_table()
 
 def _run(name: str, n: int, seed: int, t_prov: int = 100_000) -> tuple[SceneGraph, list]:
     config = OperatorConfig.from_mapping({"t_prov": t_prov, "tau_t": 0.1})
-    op, graph = make_operator(name, config, TABLE), SceneGraph(create_nodes=True)
+    op, graph = make_reference_operator(name, config, TABLE), SceneGraph(create_nodes=True)
     stream = random_stream(n, n_nodes=5, seed=seed)
     for ev, labels in stream:
         op.update(graph, ev, FrameLabels(labels))

@@ -40,16 +40,17 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from sgbelief._fast.fsum_groups import group_fsums
+from sgbelief._fast.folds import group_fsums
 from sgbelief._fast.gc import relaxed_gc
 from sgbelief.errors import DuplicateEventError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.operators.compaction import CompactionSchedule
 from sgbelief.fusion.protocol import FusionOperator, LinearRule, PairRule, ResetRule, increment_stance, new_stats
-from sgbelief.fusion.registry import make_operator
+from sgbelief.fusion.registry import make_reference_operator
 from sgbelief._fast.journal import add_logs, extend_timeline, remember_compacted_ids, set_event_index
-from sgbelief.graph.provenance import EntryStatus, FoldSummary, ProvenanceEntry, ProvenanceStore
+from sgbelief.graph.compaction import FoldSummary, merge_into_bucket
+from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore
 from sgbelief.graph.scene_graph import SceneGraph
 
 
@@ -422,7 +423,7 @@ def _install(prov: ProvenanceStore, keys: list[tuple[Any, str]], alpha: list[flo
 def _resolve(operator: FusionOperator | str, config: OperatorConfig | dict[str, Any] | None) -> FusionOperator:
     """The operator to replay: an instance as given, or a fresh one of that name with ``config``."""
     if isinstance(operator, str):
-        return make_operator(operator, config)
+        return make_reference_operator(operator, config)
     if config is not None:
         raise ValueError("batched replay: give config= only with an operator name (an operator has its own)")
     return operator
@@ -539,18 +540,17 @@ def _replay_waves(cols: EventColumns, rule: PairRule, tau_t: float, schedule: Co
     entries_of: dict[int, list[ProvenanceEntry]] = dict(zip(pair_seq.tolist(), entries))
     if buckets is not None:
         b_pair, b_t, b_alpha, b_beta, b_n, b_first, b_last = buckets
-        b_keys = list(map(keys.__getitem__, b_pair.tolist()))
-        made = map(ProvenanceEntry, repeat(None), b_t.tolist(), b_alpha.tolist(), b_beta.tolist(),
-                   repeat(EntryStatus.COMPACTED), [k[0] for k in b_keys], [k[1] for k in b_keys])
-        # what each bucket folded: committed entries only (pair rules commit every event)
+        # each pair's bucket as the store's fold makes it; what it folded: committed entries only
+        # (pair rules commit every event)
         ids = cols.event_ids
         first_ids = list(map(ids.__getitem__, ev[b_first].tolist()))
         last_ids = list(map(ids.__getitem__, ev[b_last].tolist()))
-        for p, bucket, n_folded, t_first, first_id, last_id in zip(
-                b_pair.tolist(), made, b_n.tolist(), t_entry[b_first].tolist(), first_ids, last_ids):
-            bucket.n_folded = n_folded
-            bucket.summary = FoldSummary.committed(n_folded, t_first, first_id, last_id)
-            entries_of[p].append(bucket)
+        for p, t_max, d_alpha, d_beta, n_folded, t_first, first_id, last_id in zip(
+                b_pair.tolist(), b_t.tolist(), b_alpha.tolist(), b_beta.tolist(), b_n.tolist(),
+                t_entry[b_first].tolist(), first_ids, last_ids):
+            node, predicate = keys[p]
+            summary = FoldSummary.committed(n_folded, t_first, first_id, last_id)
+            entries_of[p].append(merge_into_bucket(None, node, predicate, t_max, d_alpha, d_beta, n_folded, summary))
     # live entries (the last T_prov steps): logs, timeline, event index
     live_ev = ev[n_fold:]
     d_a, d_b = da[n_fold:], db[n_fold:]

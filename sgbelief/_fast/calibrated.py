@@ -23,7 +23,7 @@ from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import Verdict
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.rules import adjudication, consensus_cell, kl_upper_bound, revision_kl_exceeds, standing
-from sgbelief.graph.provenance import EntryStatus, EntryVerdict
+from sgbelief.graph.provenance import EntryRecord, EntryStatus, EntryVerdict
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.operators.calibrated import CalibratedOperator
@@ -80,7 +80,7 @@ def apply_fused(
     cfg = op.config
     tau_t, tau_rev, w0 = cfg.tau_t, cfg.tau_rev, cfg.w0
     prov = graph.provenance
-    record = prov.record
+    append = prov.append
     commit = prov.commit
     pairs_get = prov._pairs.get
     pending_map = prov._pending_by_pair  # pairs with entries waiting in Q or Q_bot
@@ -206,7 +206,9 @@ def apply_fused(
                         if psi != pred and label_seen.get((node, psi)) != t:  # type: ignore[union-attr]
                             label_seen[(node, psi)] = t  # type: ignore[index]
                             if prov._timeline:
-                                record(node, psi, eid, t, w0 * mass, 0.0, _COMMITTED, 1, _E_GEO, c)
+                                append(EntryRecord(node=node, predicate=psi, event_id=eid, t=t, d_alpha=w0 * mass,
+                                                   d_beta=0.0, status=_COMMITTED, stance=1, verdict=_E_GEO,
+                                                   confidence=c))
                             else:
                                 commit(node, psi, eid, t, w0 * mass, 0.0, 1, _E_GEO, c)
                 if log is None:
@@ -222,7 +224,9 @@ def apply_fused(
                         gw = w0 * mass
                         ga, gb = (gw, 0.0) if y == 1 else (0.0, gw)
                         if prov._timeline:
-                            record(node, pred, eid, t, ga, gb, _COMMITTED, 1 if y == 1 else -1, _E_GEO, c)
+                            append(EntryRecord(node=node, predicate=pred, event_id=eid, t=t, d_alpha=ga, d_beta=gb,
+                                               status=_COMMITTED, stance=1 if y == 1 else -1, verdict=_E_GEO,
+                                               confidence=c))
                         else:
                             commit(node, pred, eid, t, ga, gb, 1 if y == 1 else -1, _E_GEO, c)
                         a += ga
@@ -234,7 +238,8 @@ def apply_fused(
                     # Property 2: refused and logged, never committed; geometry's stance opposes the claim
                     stance = -1 if claim_pos else 1
                     had_pending = key in pending_map
-                    record(node, pred, eid, t, da, db, _REFUSED, stance, code, c)
+                    append(EntryRecord(node=node, predicate=pred, event_id=eid, t=t, d_alpha=da, d_beta=db,
+                                       status=_REFUSED, stance=stance, verdict=code, confidence=c))
                     if had_pending:  # otherwise the only pending entry is this refused one
                         resolutions += queues.quarantine_feedback(prov, node, pred, stance, eid, t)
                     e_refused += 1
@@ -253,7 +258,8 @@ def apply_fused(
                 else:
                     exceeds = revision_kl_exceeds(a, b, da, db, tau_rev)
                 if exceeds:
-                    record(node, pred, eid, t, da, db, _QUARANTINED, stance, code, c)
+                    append(EntryRecord(node=node, predicate=pred, event_id=eid, t=t, d_alpha=da, d_beta=db,
+                                       status=_QUARANTINED, stance=stance, verdict=code, confidence=c))
                     e_quarantined += 1
                     if report:
                         outcomes.append(TargetOutcome(node, mass, verdict, _A_QUARANTINED, 0.0, 0.0))
@@ -261,7 +267,8 @@ def apply_fused(
                     # committed entries go to the journal unless the timeline is live: then the next
                     # refusal or quarantine would materialise the journal anyway
                     if prov._timeline:
-                        record(node, pred, eid, t, da, db, _COMMITTED, stance, code, c)
+                        append(EntryRecord(node=node, predicate=pred, event_id=eid, t=t, d_alpha=da, d_beta=db,
+                                           status=_COMMITTED, stance=stance, verdict=code, confidence=c))
                     else:
                         commit(node, pred, eid, t, da, db, stance, code, c)
                     if rivals_of is not None and da > 0.0:
@@ -269,7 +276,9 @@ def apply_fused(
                         for psi in rivals_of(pred):
                             if pairs_get((node, psi)) is not None:
                                 if prov._timeline:
-                                    record(node, psi, eid, t, 0.0, da, _COMMITTED, -1, _E_EXCL, c)
+                                    append(EntryRecord(node=node, predicate=psi, event_id=eid, t=t, d_alpha=0.0,
+                                                       d_beta=da, status=_COMMITTED, stance=-1, verdict=_E_EXCL,
+                                                       confidence=c))
                                 else:
                                     commit(node, psi, eid, t, 0.0, da, -1, _E_EXCL, c)
                     e_committed += 1

@@ -1,7 +1,7 @@
-"""Compaction of a journalled provenance store without materialising its old journal records.
+"""Private: the compaction kernel behind the reference fold of :mod:`sgbelief.graph.compaction`.
 
-The reference pass (:meth:`sgbelief.graph.provenance.ProvenanceStore.compact`) folds entry
-objects. A journalled store (:mod:`sgbelief._fast.journal`) also holds committed increments as
+The reference pass (:meth:`sgbelief.graph.provenance.ProvenanceStore.compact`, with the fold of
+:mod:`sgbelief.graph.compaction`) folds entry objects. A journalled store (:mod:`sgbelief._fast.journal`) also holds committed increments as
 plain tuples (journal records); when a pass may fold them as they stand (the store checks that,
 ``old_journal``), these functions fold them straight into the pairs' compacted buckets and give,
 bit for bit and in every observable order, what materialising them first and running the
@@ -10,10 +10,12 @@ reference pass would:
 - :func:`fold_with_journal`: the old timeline entries and the old journal records, pair by
   pair, in the reference's pair order, with one ``math.fsum`` per pair over both;
 - :func:`fold_journal_records`: journal records alone (the timeline is empty), grouped by pair
-  in numpy instead of record by record.
+  in numpy instead of record by record;
+- :func:`group_fsums`: the per-pair ``math.fsum`` of many pairs' increments held in one array
+  (the batched engine's buckets).
 
-Both merge each pair's sum into its bucket with the reference's
-:func:`~sgbelief.graph.provenance.merge_into_bucket`.
+Each pair's sum goes into its bucket with the reference's
+:func:`~sgbelief.graph.compaction.merge_into_bucket`.
 """
 
 from __future__ import annotations
@@ -27,18 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from sgbelief.graph.provenance import (
-    COUNTED,
-    EntryStatus,
-    EntryVerdict,
-    FoldSummary,
-    PairKey,
-    PairLog,
-    ProvenanceEntry,
-    merge_into_bucket,
-    settled_before,
-)
-from sgbelief.graph.provenance_log import VERDICT_SYMBOLS, claim_lambda_hat, lambda_hat_sum
+from sgbelief.graph.compaction import FoldSummary, lambda_hat_sum, merge_into_bucket, settled_before
+from sgbelief.graph.provenance import COUNTED, EntryStatus, EntryVerdict, PairKey, PairLog, ProvenanceEntry
+from sgbelief.graph.provenance_log import VERDICT_SYMBOLS, claim_lambda_hat
 
 #: a committed entry not yet materialised as a ProvenanceEntry:
 #: (pair key, event id, t, d_alpha, d_beta, stance, the pair's log, verdict, confidence). The log
@@ -66,17 +59,6 @@ def last_seen_order(ids: Iterable[str | None]) -> list[str]:
     order = list(last_first)
     order.reverse()
     return order  # type: ignore[return-value]
-
-
-def old_prefix_length(timeline: deque[ProvenanceEntry], before_t: int) -> int:
-    """Length of the timeline's prefix a pass at ``before_t`` takes: up to its first live entry
-    with ``t >= before_t`` (as the reference pass pops it)."""
-    n_old = 0
-    for entry in timeline:
-        if entry.t >= before_t and entry.alive:
-            break
-        n_old += 1
-    return n_old
 
 
 def retired_ids(
@@ -367,4 +349,23 @@ def _verdicts_by_pair(logs: list[Any], glogs: list[Any], verdict_cols: list[int]
     return verdicts, sums, n_lam.tolist()
 
 
-__all__ = ["JournalRecord", "fold_journal_records", "fold_with_journal", "old_prefix_length", "retired_ids"]
+def group_fsums(values: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """``math.fsum`` of each group ``values[starts[g]:starts[g] + sizes[g]]``, bit for bit.
+
+    fsum is the correctly rounded exact sum (a zero sum is +0.0). A float addition is correctly
+    rounded too, so groups of one or two values are done in numpy (``+ 0.0`` turns -0.0 into
+    fsum's +0.0); only groups of three or more go through ``math.fsum``.
+    """
+    out = values[starts] + 0.0
+    two = sizes == 2
+    out[two] += values[starts[two] + 1]
+    big = np.flatnonzero(sizes >= 3)
+    if len(big):
+        vals = values[np.repeat(sizes >= 3, sizes)].tolist()
+        ends = np.cumsum(sizes[big]).tolist()
+        fsum = math.fsum
+        out[big] = [fsum(vals[a:b]) for a, b in zip([0, *ends[:-1]], ends)]
+    return out
+
+
+__all__ = ["JournalRecord", "fold_journal_records", "fold_with_journal", "group_fsums", "retired_ids"]

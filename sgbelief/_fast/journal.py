@@ -27,17 +27,12 @@ from itertools import islice
 from operator import eq, le
 from typing import Any, Protocol
 
-from sgbelief._fast.folds import (
-    JournalRecord,
-    fold_journal_records,
-    fold_with_journal,
-    old_prefix_length,
-    record_event_id,
-    record_t,
-)
+from sgbelief._fast.folds import JournalRecord, fold_journal_records, fold_with_journal, record_event_id, record_t
+from sgbelief.graph.compaction import old_prefix_length
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA
 from sgbelief.graph.provenance import (
     COUNTED,
+    EntryRecord,
     EntryStatus,
     EntryVerdict,
     PairKey,
@@ -198,28 +193,17 @@ class JournalledProvenanceStore(ProvenanceStore):
             self.materialize()
         return ProvenanceStore.iter_entries(self)
 
-    def record(
-        self,
-        node: Any,
-        predicate: str,
-        event_id: str | None,
-        t: int,
-        d_alpha: float,
-        d_beta: float,
-        status: EntryStatus = _COMMITTED,
-        stance: int = 0,
-        verdict: EntryVerdict | None = None,
-        confidence: float | None = None,
-    ) -> ProvenanceEntry:
+    def append(self, record: EntryRecord) -> ProvenanceEntry:
         if self._journal:  # keep arrival order: journal records come first
             self.materialize()
-        return ProvenanceStore.record(self, node, predicate, event_id, t, d_alpha, d_beta, status, stance, verdict,
-                                      confidence)
+        return ProvenanceStore.append(self, record)
 
-    def transition(self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0) -> None:
+    def transition(
+        self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0, corroborated_by: str | None = None
+    ) -> None:
         if self._journal and entry.status in COUNTED and status not in COUNTED:
             self.materialize()  # the belief is recomputed from the whole log
-        ProvenanceStore.transition(self, entry, status, scale=scale)
+        ProvenanceStore.transition(self, entry, status, scale=scale, corroborated_by=corroborated_by)
 
     def retract(self, event_id: str, *, cascade_window: int | None = None) -> list[str]:
         if self._journal:

@@ -158,14 +158,15 @@ class ConformalSlice:
     alpha_{t+1} = alpha_t + gamma (alpha - err_t), err_t = 1 when y_t was not in the set.
     """
 
-    __slots__ = ("pending", "srt", "sfifo", "chunks", "n_chunks", "n_sorted", "alpha_t", "n_err", "n_seen", "capacity")
+    __slots__ = ("pending", "_merged_ascending", "_merged_arrival", "chunks", "n_chunks", "n_sorted", "alpha_t", "n_err",
+                 "n_seen", "capacity")
 
     def __init__(self, alpha: float, capacity: int | None = None) -> None:
         self.pending: array = array("d")
         #: the merged scores, ascending (read ``sorted``: it merges the committed batches first)
-        self.srt: list[float] | np.ndarray = []
+        self._merged_ascending: list[float] | np.ndarray = []
         #: the merged scores in arrival order (kept only with a capacity)
-        self.sfifo: list[float] | np.ndarray = []
+        self._merged_arrival: list[float] | np.ndarray = []
         #: batches committed by ``refresh`` and not merged yet (arrival order), and their total size
         self.chunks: list[array] = []
         self.n_chunks = 0
@@ -185,14 +186,14 @@ class ConformalSlice:
         """The committed scores, ascending."""
         if self.chunks:
             self.merge()
-        return self.srt
+        return self._merged_ascending
 
     @property
     def fifo(self) -> list[float] | np.ndarray:
         """The scores of ``sorted`` in arrival order (kept only with a capacity)."""
         if self.chunks:
             self.merge()
-        return self.sfifo
+        return self._merged_arrival
 
     def add(self, score: float) -> None:
         """Append one score to the pending ones (committed by the next :meth:`refresh`)."""
@@ -222,7 +223,7 @@ class ConformalSlice:
         if a > 0:
             if self.chunks:
                 self.merge()
-            q = conformal_quantile(self.srt, a)  # self.threshold(a), one call less per outcome
+            q = conformal_quantile(self._merged_ascending, a)  # self.threshold(a), one call less per outcome
         else:
             q = _INF
         err = 1 if score > q else 0
@@ -247,8 +248,8 @@ class ConformalSlice:
             if n > cap:
                 n = cap
             if self.n_chunks >= cap:  # the committed batches alone fill the window: the merged scores all slide out
-                self.srt = []
-                self.sfifo = []
+                self._merged_ascending = []
+                self._merged_arrival = []
                 while self.n_chunks - len(chunks[0]) >= cap:
                     self.n_chunks -= len(chunks.pop(0))
         self.n_sorted = n
@@ -263,46 +264,48 @@ class ConformalSlice:
             new += ch
         self.chunks = []
         self.n_chunks = 0
-        srt = self.srt
-        if type(srt) is list and len(srt) + len(new) <= SMALL and _no_nan(new):  # no NaN: list order == numpy order
-            self._merge_small(srt, new)
+        ascending = self._merged_ascending
+        # no NaN: list order == numpy order
+        if type(ascending) is list and len(ascending) + len(new) <= SMALL and _no_nan(new):
+            self._merge_small(ascending, new)
         else:
             self._merge_numpy(np.frombuffer(new, dtype=np.float64))
 
-    def _merge_small(self, srt: list[float], new: array) -> None:
+    def _merge_small(self, ascending: list[float], new: array) -> None:
         cap = self.capacity
         if cap is not None:
-            fifo = self.sfifo
+            fifo = self._merged_arrival
             drop = len(fifo) + len(new) - cap
             if drop > 0:
                 drop_old = min(drop, len(fifo))
                 for v in fifo[:drop_old]:  # remove_sorted: the leftmost equal score
-                    i = bisect_left(srt, v)
-                    if i >= len(srt) or srt[i] != v:
+                    i = bisect_left(ascending, v)
+                    if i >= len(ascending) or ascending[i] != v:
                         raise ValueError("remove_sorted: values are not a sub-multiset of the sorted buffer")
-                    del srt[i]
+                    del ascending[i]
                 new = new[max(drop - len(fifo), 0):]
                 fifo = fifo[drop_old:]  # type: ignore[assignment]
             fifo.extend(new)  # type: ignore[union-attr]
-            self.sfifo = fifo
+            self._merged_arrival = fifo
         for v in new:  # merge_sorted: a new score goes after the equal ones already there
-            insort_right(srt, v)
+            insort_right(ascending, v)
 
     def _merge_numpy(self, new: np.ndarray) -> None:
-        srt = self.srt
-        if type(srt) is list:
-            srt = np.array(srt, dtype=np.float64)
+        ascending = self._merged_ascending
+        if type(ascending) is list:
+            ascending = np.array(ascending, dtype=np.float64)
         if self.capacity is not None:
-            self.sfifo, evicted, new = slide_window(np.asarray(self.sfifo, dtype=np.float64), new, self.capacity)
+            arrival = np.asarray(self._merged_arrival, dtype=np.float64)
+            self._merged_arrival, evicted, new = slide_window(arrival, new, self.capacity)
             if len(evicted):
-                srt = remove_sorted(srt, evicted)  # type: ignore[arg-type]
-        self.srt = merge_sorted(srt, new)  # type: ignore[arg-type,assignment]
+                ascending = remove_sorted(ascending, evicted)  # type: ignore[arg-type]
+        self._merged_ascending = merge_sorted(ascending, new)  # type: ignore[arg-type,assignment]
 
     def threshold(self, alpha: float) -> float:
         """:func:`conformal_quantile` of the committed scores at level ``alpha``."""
         if self.chunks:
             self.merge()
-        return conformal_quantile(self.srt, alpha)
+        return conformal_quantile(self._merged_ascending, alpha)
 
     def coverage_of_rank(self, q: float) -> int:
         """How many committed scores are <= q."""
@@ -349,10 +352,10 @@ def merge_sorted(base: np.ndarray, new: np.ndarray, *payload: tuple[np.ndarray, 
         order = np.argsort(new, kind="stable")
         new = new[order]
     else:
-        srt = np.sort(new)  # (SIMD) sort; equal values are bit-identical unless zeros (+-0) or NaN,
-        if len(srt) and (not srt.all() or srt[-1] != srt[-1]):  # whose arrival order is kept then
-            srt = np.sort(new, kind="stable")
-        new = srt
+        ordered = np.sort(new)  # (SIMD) sort; equal values are bit-identical unless zeros (+-0) or NaN,
+        if len(ordered) and (not ordered.all() or ordered[-1] != ordered[-1]):  # whose arrival order is kept then
+            ordered = np.sort(new, kind="stable")
+        new = ordered
     at = np.searchsorted(base, new, side="right")
     n, k = len(base), len(new)
     at += np.arange(k)  # positions of the new values in the merged array

@@ -200,7 +200,7 @@ class MondrianCalibrator:
             cs = s.c
             cs.append(c)
             s.y.append(y)
-            s.sc.append(score)
+            s.pending_scores.append(score)
             if len(cs) >= s.refit_gap:
                 s.refit()
 

@@ -47,7 +47,7 @@ class CalibrationSlice:
     """
 
     __slots__ = (
-        "c", "y", "sc", "batches", "n_batch", "store", "capacity", "n_fit", "n_seen_fit", "stale",
+        "c", "y", "pending_scores", "batches", "n_batch", "store", "capacity", "n_fit", "n_seen_fit", "stale",
         "_kx", "_ky", "_base_rate", "_log_prior_odds", "eps", "conformal", "min_refit", "refit_growth", "refit_gap",
     )
 
@@ -64,7 +64,7 @@ class CalibrationSlice:
         self.y = array("b")
         self.conformal = ConformalSlice(alpha, capacity)
         #: the pending scores (Eq. 1), ``conformal.pending``
-        self.sc: array = self.conformal.pending
+        self.pending_scores: array = self.conformal.pending
         #: batches (c, y) committed by ``refit`` and not merged into the store yet, and their total size
         self.batches: list[tuple[array, array]] = []
         self.n_batch = 0
@@ -135,28 +135,28 @@ class CalibrationSlice:
         return self._log_prior_odds
 
     @property
-    def fc(self) -> Sequence[float]:
+    def window_confidences(self) -> Sequence[float]:
         """The fitted window's confidences in arrival order."""
         if self.stale:
             self.fit()
         return self.store.window()[0]
 
     @property
-    def fy(self) -> Sequence[int]:
+    def window_labels(self) -> Sequence[int]:
         """The fitted window's labels in arrival order."""
         if self.stale:
             self.fit()
         return self.store.window()[1]
 
     @property
-    def sx0(self) -> np.ndarray:
+    def sorted_negatives(self) -> np.ndarray:
         """Fitted confidences of outcomes y = 0, ascending."""
         if self.stale:
             self.fit()
         return self.store.sorted_by_label(0)
 
     @property
-    def sx1(self) -> np.ndarray:
+    def sorted_positives(self) -> np.ndarray:
         """Fitted confidences of outcomes y = 1, ascending."""
         if self.stale:
             self.fit()
@@ -173,7 +173,7 @@ class CalibrationSlice:
         cs = self.c
         cs.append(c)
         self.y.append(y)
-        self.sc.append(score)
+        self.pending_scores.append(score)
         if refit and len(cs) >= self.refit_gap:
             self.refit()
 

@@ -6,7 +6,7 @@ entries leave them:
 
 - Q (revisions, KL(B || B') > tau_rev): a later event at the same (v, phi) within T_cor whose
   stance agrees commits the entry at full weight (recording the corroborating event, so a later
-  retraction cascades to it); one whose stance disagrees discards it; after T_cor steps it is
+  retraction cascades to it: ``transition(..., corroborated_by=)``); one whose stance disagrees discards it; after T_cor steps it is
   released at reduced weight w/k; an explicit confirmation commits it.
 - Q⊥ (refused ⊥ claims): a later T verdict at the same (v, phi) within T_disagree marks it
   resolved, *not* committed; after T_disagree it expires unresolved; an explicit confirmation
@@ -38,8 +38,7 @@ def quarantine_feedback(
         if entry.status is not EntryStatus.QUARANTINED or entry.event_id == event_id:
             continue
         if entry.stance == stance:
-            store.transition(entry, EntryStatus.COMMITTED)
-            entry.corroborated_by = [*(entry.corroborated_by or ()), event_id]
+            store.transition(entry, EntryStatus.COMMITTED, corroborated_by=event_id)
             out.append(QueueResolution(entry.event_id, node, predicate, "corroborated", t))
         elif entry.stance == -stance:
             store.transition(entry, EntryStatus.DISCARDED)

@@ -1,16 +1,20 @@
 """Resolve an operator from its name (or pass an instance through): one place, like MAPIE's resolvers.
 
-This is the fusion layer's registry: the operators it builds run the reference engine (the named
-steps). The public :func:`sgbelief.make_operator` (:mod:`sgbelief.api.operators`) resolves names
-here and injects the fused engines of :mod:`sgbelief._fast` (``engine="fast"``, its default).
+This is the fusion layer's registry: :func:`make_reference_operator` builds operators that run the
+reference engine (the named steps). The public :func:`sgbelief.make_operator`
+(:mod:`sgbelief.api.operators`) resolves names here and injects the fused engines of
+:mod:`sgbelief._fast` (``engine="fast"``, its default). The old name of this module's builder,
+``make_operator``, warns until sgbelief 0.2.0 removes it (it ran another engine than
+``sgbelief.make_operator`` under the same name).
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
-from sgbelief.errors import ConfigError
+from sgbelief.errors import ConfigError, SgbeliefDeprecationWarning
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.operators import (
@@ -64,13 +68,28 @@ def require_operator(operator: object) -> FusionOperator:
     raise TypeError(f"expected an operator name or a FusionOperator, got {type(operator).__name__}")
 
 
-def make_operator(
+def make_reference_operator(
     name: str | FusionOperator,
     config: OperatorConfig | dict[str, Any] | str | None = None,
     vocabulary: SubsumptionTable | None = None,
 ) -> FusionOperator:
-    """``make_operator("comod", config, vocabulary)`` with the reference engine; an operator
-    instance is returned unchanged. The public ``sgbelief.make_operator`` chooses the engine."""
+    """``make_reference_operator("comod", config, vocabulary)``: the operator registered under
+    ``name`` running the reference engine (the named steps); an operator instance is returned
+    unchanged. ``sgbelief.make_operator(..., engine="reference")`` builds the same operator."""
     if not isinstance(name, str):
         return require_operator(name)
     return operator_class(name)(config, vocabulary)
+
+
+def deprecated_make_operator(module: str) -> Callable[..., FusionOperator]:
+    """:func:`make_reference_operator`, with the warning of its old name ``<module>.make_operator``."""
+    warnings.warn(f"{module}.make_operator is deprecated (removed in sgbelief 0.2.0): it builds the reference "
+                  "engine; call make_reference_operator (the same), or sgbelief.make_operator (engine='fast' by "
+                  "default)", SgbeliefDeprecationWarning, stacklevel=3)
+    return make_reference_operator
+
+
+def __getattr__(name: str) -> Any:
+    if name == "make_operator":
+        return deprecated_make_operator(__name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

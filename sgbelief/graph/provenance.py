@@ -37,25 +37,28 @@ from typing import Any
 
 from sgbelief.errors import FormatError, RetractionError
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA, BetaBelief
+from sgbelief.graph.compaction import (
+    FoldSummary,
+    attach_summary,
+    bucket_summary,
+    fold_into_bucket,
+    merge_into_bucket,
+    settled_before,
+    take_old,
+)
 from sgbelief.graph.provenance_log import (
     COUNTED,
     PENDING,
+    EntryRecord,
     EntryStatus,
     EntryVerdict,
-    FoldSummary,
     PairLog,
     ProvenanceEntry,
-    attach_summary,
     belief_from_entries,
-    bucket_summary,
     entry_extras,
     entry_row,
     event_list,
-    fold_into_bucket,
     index_event,
-    merge_into_bucket,
-    merged_summary,
-    settled_before,
 )
 
 Node = Hashable
@@ -63,7 +66,7 @@ PairKey = tuple[Any, str]
 
 
 __all__ = [
-    "COUNTED", "PENDING", "EntryStatus", "EntryVerdict", "FoldSummary", "Node", "PairKey", "PairLog",
+    "COUNTED", "PENDING", "EntryRecord", "EntryStatus", "EntryVerdict", "FoldSummary", "Node", "PairKey", "PairLog",
     "ProvenanceEntry", "ProvenanceStore", "belief_from_entries", "event_list", "fold_into_bucket",
     "index_event", "merge_into_bucket", "settled_before"
 ]
@@ -229,22 +232,10 @@ class ProvenanceStore:
         return False
 
     # ------------------------------------------------------------------ writes
-    def record(
-        self,
-        node: Any,
-        predicate: str,
-        event_id: str | None,
-        t: int,
-        d_alpha: float,
-        d_beta: float,
-        status: EntryStatus = EntryStatus.COMMITTED,
-        stance: int = 0,
-        verdict: EntryVerdict | None = None,
-        confidence: float | None = None,
-    ) -> ProvenanceEntry:
-        """Append an entry; counted statuses update the belief, pending ones join their queue.
-        ``verdict`` and ``confidence``: what the operator knew when it wrote the entry (None:
-        nothing, e.g. a baseline)."""
+    def append(self, record: EntryRecord) -> ProvenanceEntry:
+        """Append an entry (:class:`EntryRecord`); counted statuses update the belief, pending
+        ones join their queue. Returns the entry (a live object: change it through the store)."""
+        node, predicate, event_id, t, d_alpha, d_beta, status, stance, verdict, confidence = record
         key = (node, predicate)
         log = self._pairs.get(key)
         if log is None:
@@ -261,16 +252,39 @@ class ProvenanceStore:
         self._timeline.append(entry)
         return entry
 
+    def record(
+        self,
+        node: Any,
+        predicate: str,
+        event_id: str | None,
+        t: int,
+        d_alpha: float,
+        d_beta: float,
+        status: EntryStatus = EntryStatus.COMMITTED,
+        stance: int = 0,
+        verdict: EntryVerdict | None = None,
+        confidence: float | None = None,
+    ) -> ProvenanceEntry:
+        """:meth:`append` of the :class:`EntryRecord` with these fields (a shorthand for tests
+        and scripts; library code builds the record by keyword)."""
+        return self.append(EntryRecord(node, predicate, event_id, t, d_alpha, d_beta, status, stance, verdict,
+                                       confidence))
+
     def commit(
         self, node: Any, predicate: str, event_id: str | None, t: int, d_alpha: float, d_beta: float, stance: int = 0,
         verdict: EntryVerdict | None = None, confidence: float | None = None,
     ) -> None:
-        """Record a committed increment (Eq. 3): ``record(..., COMMITTED, stance, verdict,
-        confidence)`` without returning the entry (so a store is free to build the entry later)."""
-        self.record(node, predicate, event_id, t, d_alpha, d_beta, _COMMITTED, stance, verdict, confidence)
+        """Append a committed increment (Eq. 3) without returning the entry (so a store is free
+        to build the entry later): the operators' hot path, positional for speed."""
+        self.append(EntryRecord(node, predicate, event_id, t, d_alpha, d_beta, _COMMITTED, stance, verdict,
+                                confidence))
 
-    def transition(self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0) -> None:
-        """Move an entry to a new status; ``scale`` multiplies its increments (w/k on timeout).
+    def transition(
+        self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0, corroborated_by: str | None = None
+    ) -> None:
+        """Move an entry to a new status; ``scale`` multiplies its increments (w/k on timeout);
+        ``corroborated_by``: the event whose corroboration moves it (added to the entry's
+        ``corroborated_by``, so that retracting the entry's event cascades to it).
 
         The belief changes exactly when the entry starts (or stops) being counted.
         """
@@ -295,6 +309,8 @@ class ProvenanceStore:
             self._add_pending((entry.node, entry.predicate), entry)
         if was_counted and not counted:
             self._refresh(log)
+        if corroborated_by is not None:
+            entry.corroborated_by = [*(entry.corroborated_by or ()), corroborated_by]
 
     def _refresh(self, log: PairLog) -> None:
         """Recompute a pair's running belief from its log (Eq. 4)."""
@@ -392,14 +408,6 @@ class ProvenanceStore:
         return ids
 
     # ------------------------------------------------------------- compaction
-    def _take_old(self, before_t: int) -> list[ProvenanceEntry]:
-        """Pop the timeline's prefix up to its first live entry with ``t >= before_t``."""
-        timeline = self._timeline
-        old: list[ProvenanceEntry] = []
-        while timeline and (timeline[0].t < before_t or not timeline[0].alive):
-            old.append(timeline.popleft())
-        return old
-
     def compact(self, before_t: int) -> int:
         """Fold every settled entry with ``t < before_t`` into one equivalent increment per pair
         (:func:`fold_into_bucket`); returns the number of entries folded.
@@ -414,7 +422,7 @@ class ProvenanceStore:
         pass. Dead entries (retracted) hold nothing back, so a loaded copy, which no longer holds
         them, folds the same entries.
         """
-        old = self._take_old(before_t)
+        old = take_old(self._timeline, before_t)
         folded = 0
         retired: list[str] = []
         for key in dict.fromkeys([(e.node, e.predicate) for e in old if e.alive]):
@@ -472,11 +480,8 @@ class ProvenanceStore:
             if len(buckets) > 1:
                 head = buckets[0]
                 for extra in buckets[1:]:
-                    head.d_alpha = math.fsum((head.d_alpha, extra.d_alpha))
-                    head.d_beta = math.fsum((head.d_beta, extra.d_beta))
-                    head.n_folded += extra.n_folded
-                    head.summary = merged_summary(head, extra)
-                    head.t = max(head.t, extra.t)
+                    merge_into_bucket(head, keep, key[1], extra.t, extra.d_alpha, extra.d_beta, extra.n_folded,
+                                      extra.summary)
                     extra.alive = False
                 merged = [e for e in merged if e.alive]
                 merged.remove(head)

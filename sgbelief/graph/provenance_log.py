@@ -6,9 +6,10 @@ the calibrated operators, the verdict (:class:`EntryVerdict`) and the event's ra
 claim's calibrated Lambda-hat and weight are not stored but read back from its increments
 (:func:`claim_lambda_hat`, :func:`claim_weight`, the inversion of Eq. 3). A pair's log
 (:class:`PairLog`) is its entries in order with the running belief. The belief is *defined*
-by the log (:func:`belief_from_entries`, Eq. 4); compaction folds old entries into one
-``compacted`` entry of equal increment (:func:`fold_into_bucket`). The store of all logs, with
-the queues, the event index, retraction and compaction, is :mod:`sgbelief.graph.provenance`.
+by the log (:func:`belief_from_entries`, Eq. 4). A new entry is written as an
+:class:`EntryRecord` (built by keyword). Compaction, which folds old entries into one
+``compacted`` entry of equal increment, is :mod:`sgbelief.graph.compaction`; the store of all
+logs, with the queues, the event index and retraction, is :mod:`sgbelief.graph.provenance`.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from enum import Enum, IntEnum
-from typing import Any
+from typing import Any, NamedTuple
 
 
 class EntryStatus(str, Enum):
@@ -41,8 +42,6 @@ COUNTED: frozenset[EntryStatus] = frozenset(
 #: statuses of entries still waiting in a queue
 PENDING: frozenset[EntryStatus] = frozenset({EntryStatus.REFUSED, EntryStatus.QUARANTINED})
 
-# a member read once (an attribute lookup on an Enum class runs Python code)
-_COMPACTED = EntryStatus.COMPACTED
 
 
 class EntryVerdict(IntEnum):
@@ -68,7 +67,7 @@ class EntryVerdict(IntEnum):
         return self is not EntryVerdict.GEOMETRIC and self is not EntryVerdict.EXCLUSION
 
 
-#: the symbol of each verdict code (the keys of :attr:`FoldSummary.verdicts`)
+#: the symbol of each verdict code (the keys of ``FoldSummary.verdicts``)
 VERDICT_SYMBOLS: dict[EntryVerdict, str] = {
     EntryVerdict.NO_CLAIM: "∅",
     EntryVerdict.CORROBORATES: "⊤",
@@ -78,9 +77,6 @@ VERDICT_SYMBOLS: dict[EntryVerdict, str] = {
 }
 #: verdict code -> member (for loaders: ``VERDICT_BY_CODE[code]``)
 VERDICT_BY_CODE: tuple[EntryVerdict, ...] = tuple(EntryVerdict)
-_GEOMETRIC = EntryVerdict.GEOMETRIC
-_SYMBOL_OF = {v: VERDICT_SYMBOLS[v] for v in EntryVerdict}
-_SYMBOL_ORDER = tuple(VERDICT_SYMBOLS.values())  # the order a summary lists its verdicts in
 
 
 def claim_lambda_hat(d_alpha: float, d_beta: float) -> float | None:
@@ -115,15 +111,6 @@ def entry_lambda_hat(entry: ProvenanceEntry) -> float | None:
     if v is None or not v.is_claim:
         return None
     return claim_lambda_hat(entry.d_alpha, entry.d_beta)
-
-
-def lambda_hat_sum(values: Iterable[float]) -> float:
-    """The exactly rounded sum of Lambda-hat values (``math.fsum``; +inf when it overflows), so
-    that it does not depend on the order in which compaction meets them."""
-    try:
-        return math.fsum(values)
-    except OverflowError:
-        return math.inf
 
 
 class ProvenanceEntry:
@@ -174,8 +161,9 @@ class ProvenanceEntry:
         self.n_folded = 1
         #: False once retracted or folded away
         self.alive = True
-        #: for a compacted bucket, what it folded (:class:`FoldSummary`); None otherwise, or unknown
-        self.summary: FoldSummary | None = None
+        #: for a compacted bucket, what it folded (a :class:`~sgbelief.graph.compaction.FoldSummary`,
+        #: which compaction, one module up, writes); None otherwise, or unknown
+        self.summary: Any = None
         #: the verdict when the operator wrote the entry (None: the operator has none, or not recorded)
         self.verdict = verdict
         #: the event's raw confidence c (None: not recorded)
@@ -202,152 +190,26 @@ class ProvenanceEntry:
         )
 
 
-class FoldSummary:
-    """What a compacted bucket folded, in bounded memory (at most one count per status and per
-    verdict): how many original entries per status and per recorded verdict (⊤, ⊥, ∅,
-    "geometric"), the sum of Lambda-hat over the folded claim entries with their number (so
-    their mean stays answerable), the time of the first, and the first and last event ids (in
-    log order). The last time, the summed increments and the total are the bucket's own ``t``,
-    ``d_alpha``/``d_beta`` and ``n_folded``. Entries folded before summaries were kept (files
-    written by older versions) count under the status ``"unknown"``; entries without a recorded
-    verdict count under no verdict."""
+class EntryRecord(NamedTuple):
+    """The fields of one new log entry, built by keyword and handed to a store
+    (``store.append(EntryRecord(node=v, predicate=phi, event_id=..., t=..., d_alpha=...,
+    d_beta=..., status=..., stance=..., verdict=..., confidence=...))``); the store makes the
+    :class:`ProvenanceEntry` (which then changes only through the store)."""
 
-    __slots__ = ("counts", "t_first", "first_event_id", "last_event_id", "verdicts", "lambda_hat_sum",
-                 "n_lambda_hat")
-
-    def __init__(
-        self,
-        counts: dict[str, int],
-        t_first: int | None,
-        first_event_id: str | None,
-        last_event_id: str | None,
-        verdicts: dict[str, int] | None = None,
-        lambda_hat_sum: float = 0.0,
-        n_lambda_hat: int = 0,
-    ) -> None:
-        self.counts = counts
-        self.t_first = t_first
-        self.first_event_id = first_event_id
-        self.last_event_id = last_event_id
-        #: folded entries per recorded verdict symbol (VERDICT_SYMBOLS)
-        self.verdicts: dict[str, int] = {} if verdicts is None else verdicts
-        #: sum of Lambda-hat over the folded claim entries (:func:`entry_lambda_hat`), and their number
-        self.lambda_hat_sum = lambda_hat_sum
-        self.n_lambda_hat = n_lambda_hat
-
-    @property
-    def mean_lambda_hat(self) -> float | None:
-        """The mean Lambda-hat of the folded claims (None when none had one recorded)."""
-        return self.lambda_hat_sum / self.n_lambda_hat if self.n_lambda_hat else None
-
-    @classmethod
-    def unknown(cls, n: int) -> FoldSummary:
-        """The summary of ``n`` folded entries of which nothing was kept."""
-        return cls({UNKNOWN_STATUS: n}, None, None, None)
-
-    @classmethod
-    def committed(cls, n: int, t_first: int, first_event_id: str | None, last_event_id: str | None,
-                  verdicts: dict[str, int] | None = None) -> FoldSummary:
-        """The summary of ``n`` committed entries (what the journalled fast paths fold); their
-        Lambda-hat sum is the caller's to set."""
-        return cls({EntryStatus.COMMITTED.value: n}, t_first, first_event_id, last_event_id, verdicts)
-
-    @classmethod
-    def of_entries(cls, folded: Sequence[ProvenanceEntry], later: FoldSummary | None = None,
-                   later_lambda_hats: Sequence[float] = ()) -> FoldSummary:
-        """The summary of folding these entries (a bucket among them contributes its summary),
-        then, when given, the entries ``later`` summarises (folded in the same pass, after these)
-        whose Lambda-hat values are ``later_lambda_hats``: the Lambda-hat sum is one exactly
-        rounded sum over all of them (:func:`lambda_hat_sum`), whatever way the pass is split."""
-        out = cls({}, None, None, None)
-        lams: list[float] = []
-        counts, verdicts = out.counts, out.verdicts
-        for e in folded:
-            if e.status is _COMPACTED:
-                s = e.summary if e.summary is not None else cls.unknown(e.n_folded)
-                lams.append(s.lambda_hat_sum)
-                out.absorb(s, with_lambda_hat=False)
-                continue
-            status = e.status.value
-            counts[status] = counts.get(status, 0) + 1
-            if e.verdict is not None:
-                sym = _SYMBOL_OF[e.verdict]
-                verdicts[sym] = verdicts.get(sym, 0) + 1
-                lam = entry_lambda_hat(e)
-                if lam is not None:
-                    lams.append(lam)
-                    out.n_lambda_hat += 1
-            if out.t_first is None or e.t < out.t_first:
-                out.t_first = e.t
-            if e.event_id is not None:
-                if out.first_event_id is None:
-                    out.first_event_id = e.event_id
-                out.last_event_id = e.event_id
-        if later is not None:
-            out.absorb(later, with_lambda_hat=False)
-            lams += later_lambda_hats
-        out.lambda_hat_sum = lambda_hat_sum(lams)
-        return out
-
-    def absorb(self, later: FoldSummary, *, with_lambda_hat: bool = True) -> None:
-        """Add the summary of entries folded after (or logged after) these ones (their
-        Lambda-hat sum by one IEEE addition, unless ``with_lambda_hat`` is false: then only
-        their count)."""
-        counts = self.counts
-        for status, n in later.counts.items():
-            counts[status] = counts.get(status, 0) + n
-        verdicts = self.verdicts
-        for sym, n in later.verdicts.items():
-            verdicts[sym] = verdicts.get(sym, 0) + n
-        if with_lambda_hat:
-            self.lambda_hat_sum += later.lambda_hat_sum
-        self.n_lambda_hat += later.n_lambda_hat
-        if later.t_first is not None and (self.t_first is None or later.t_first < self.t_first):
-            self.t_first = later.t_first
-        if self.first_event_id is None:
-            self.first_event_id = later.first_event_id
-        if later.last_event_id is not None:
-            self.last_event_id = later.last_event_id
-
-    def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready dict (Lambda-hat's sum +inf only if it overflowed: then written as null)."""
-        lam = self.lambda_hat_sum
-        return {
-            "counts": dict(self.counts),
-            "t_first": self.t_first,
-            "first_event_id": self.first_event_id,
-            "last_event_id": self.last_event_id,
-            "verdicts": {sym: self.verdicts[sym] for sym in _SYMBOL_ORDER if sym in self.verdicts},
-            "lambda_hat_sum": lam if math.isfinite(lam) else None,
-            "n_lambda_hat": self.n_lambda_hat,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> FoldSummary:
-        """A summary from :meth:`to_dict`'s form; summaries written before verdicts were kept
-        (no ``verdicts`` / ``lambda_hat_sum``) load with none."""
-        counts = {str(k): int(v) for k, v in data["counts"].items()}
-        t_first = data.get("t_first")
-        verdicts = {str(k): int(v) for k, v in (data.get("verdicts") or {}).items()}
-        unknown = set(verdicts) - set(VERDICT_SYMBOLS.values())
-        if unknown:
-            raise ValueError(f"unknown verdict {sorted(unknown)[0]!r} in a fold summary")
-        lam = data.get("lambda_hat_sum", 0.0)
-        n_lam = int(data.get("n_lambda_hat", 0))
-        if n_lam < 0 or any(v < 0 for v in (*counts.values(), *verdicts.values())):
-            raise ValueError("fold summary counts must be >= 0")
-        return cls(counts, None if t_first is None else int(t_first), data.get("first_event_id"),
-                   data.get("last_event_id"), verdicts, math.inf if lam is None else float(lam), n_lam)
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, FoldSummary) and self.to_dict() == other.to_dict()
-
-    def __repr__(self) -> str:
-        return f"FoldSummary({self.to_dict()!r})"
-
-
-#: the status under which a summary counts folded entries whose statuses were not kept
-UNKNOWN_STATUS = "unknown"
+    node: Any
+    predicate: str
+    event_id: str | None
+    t: int
+    d_alpha: float
+    d_beta: float
+    #: the entry's status: counted ones change the belief, pending ones join their queue
+    status: EntryStatus = EntryStatus.COMMITTED
+    #: +1 when the evidence supports the predicate, -1 when it denies it, 0 neutral
+    stance: int = 0
+    #: what the channel said when the operator wrote the entry (None: no verdict, e.g. a baseline)
+    verdict: EntryVerdict | None = None
+    #: the event's raw confidence c (None: not recorded)
+    confidence: float | None = None
 
 
 # ------------------------------------------------------------------ the equations
@@ -362,99 +224,6 @@ def belief_from_entries(prior: tuple[float, float], entries: Iterable[Provenance
         prior[0] + math.fsum(e.d_alpha for e in counted),
         prior[1] + math.fsum(e.d_beta for e in counted),
     )
-
-
-def settled_before(
-    entries: Sequence[ProvenanceEntry], before_t: int
-) -> tuple[ProvenanceEntry | None, list[ProvenanceEntry], list[ProvenanceEntry]]:
-    """Split a pair's log for compaction: (its compacted bucket or None, the entries to fold,
-    the entries kept). Folded are the settled entries (not pending in a queue) with
-    ``t < before_t``, and any further compacted entry (a log holds at most one bucket)."""
-    bucket: ProvenanceEntry | None = None
-    fold: list[ProvenanceEntry] = []
-    keep: list[ProvenanceEntry] = []
-    for entry in entries:
-        if entry.status is _COMPACTED and bucket is None:
-            bucket = entry
-        elif entry.status is _COMPACTED or (entry.t < before_t and entry.status not in PENDING):
-            fold.append(entry)
-        else:
-            keep.append(entry)
-    return bucket, fold, keep
-
-
-def fold_into_bucket(
-    bucket: ProvenanceEntry | None, folded: Sequence[ProvenanceEntry], node: Any, predicate: str
-) -> ProvenanceEntry:
-    """Compaction (§4.3): fold entries into a pair's ``compacted`` bucket (a new one when None).
-
-    The bucket's increment grows by the exactly rounded sum of the folded entries' counted
-    increments, so the pair's belief under Eq. 4 is unchanged; it stands for as many original
-    entries as they did (``n_folded``) and takes the latest of their times."""
-    d_alpha = math.fsum(e.d_alpha for e in folded if e.status in COUNTED)
-    d_beta = math.fsum(e.d_beta for e in folded if e.status in COUNTED)
-    n_folded = sum(e.n_folded for e in folded)
-    t_max = max(e.t for e in folded)
-    summary = FoldSummary.of_entries(folded)
-    return merge_into_bucket(bucket, node, predicate, t_max, d_alpha, d_beta, n_folded, summary)
-
-
-def merge_into_bucket(
-    bucket: ProvenanceEntry | None,
-    node: Any,
-    predicate: str,
-    t_max: int,
-    d_alpha: float,
-    d_beta: float,
-    n_folded: int,
-    summary: FoldSummary | None = None,
-) -> ProvenanceEntry:
-    """Add one folded increment (already summed) to a pair's bucket, or make the bucket.
-    ``summary`` describes the folded entries (None: nothing known of them but their number).
-
-    One IEEE addition of two floats is correctly rounded, so adding the sum to the bucket equals
-    ``math.fsum`` of the two."""
-    if summary is None:
-        summary = FoldSummary.unknown(n_folded)
-    if bucket is None:
-        bucket = ProvenanceEntry(None, t_max, d_alpha, d_beta, _COMPACTED, node, predicate)
-        bucket.n_folded = n_folded
-        bucket.summary = summary
-        return bucket
-    if bucket.summary is None:
-        bucket.summary = FoldSummary.unknown(bucket.n_folded)
-    bucket.summary.absorb(summary)
-    bucket.d_alpha += d_alpha
-    bucket.d_beta += d_beta
-    bucket.n_folded += n_folded
-    if t_max > bucket.t:
-        bucket.t = t_max
-    return bucket
-
-
-def bucket_summary(entries: Iterable[ProvenanceEntry]) -> FoldSummary | None:
-    """The fold summary of a log's compacted bucket (None without a bucket or a summary)."""
-    for e in entries:
-        if e.status is _COMPACTED:
-            return e.summary
-    return None
-
-
-def attach_summary(entries: list[ProvenanceEntry], summary: FoldSummary, where: str) -> None:
-    """Give a loaded log's bucket its saved fold summary."""
-    for e in entries:
-        if e.status is _COMPACTED:
-            e.summary = summary
-            return
-    raise ValueError(f"{where}.fold_summary: the pair has no compacted entry to summarise")
-
-
-def merged_summary(head: ProvenanceEntry, extra: ProvenanceEntry) -> FoldSummary:
-    """The summary of two buckets merged into one (migration), ``head`` first."""
-    merged = FoldSummary({}, None, None, None)
-    for bucket, n in ((head, head.n_folded - extra.n_folded), (extra, extra.n_folded)):
-        merged.absorb(bucket.summary if bucket.summary is not None else FoldSummary.unknown(n))
-    return merged
 
 
 # ------------------------------------------------------------------ a pair's log

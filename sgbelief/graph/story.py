@@ -7,7 +7,7 @@ records its verdict (⊤ / ⊥ / ∅, or "geometric" for the geometric label obs
 and the event's raw confidence; a claim's calibrated Lambda-hat and weight are read back from its
 increments (Eq. 3 inverted: :func:`~sgbelief.graph.provenance_log.claim_lambda_hat`,
 :func:`~sgbelief.graph.provenance_log.claim_weight`). Compaction (T_prov) folds old entries into
-one ``compacted`` bucket; its :class:`~sgbelief.graph.provenance_log.FoldSummary` keeps how
+one ``compacted`` bucket; its :class:`~sgbelief.graph.compaction.FoldSummary` keeps how
 many entries of each status and verdict it folded, the sum of their Lambda-hat, the time range
 and the first and last event ids, so the counts of a story do not depend on compaction.
 
@@ -22,9 +22,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from sgbelief.graph.compaction import UNKNOWN_STATUS
 from sgbelief.graph.provenance_log import (
     COUNTED,
-    UNKNOWN_STATUS,
     VERDICT_SYMBOLS,
     EntryStatus,
     EntryVerdict,

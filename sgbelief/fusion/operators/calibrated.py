@@ -10,6 +10,7 @@ identical by ``tests/test_engines.py``. The method options and their derivations
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import TYPE_CHECKING, Any
 
 from sgbelief.calibration.conformal import ConformalSlice, PredictionSet, no_coverage, prediction_set
@@ -40,7 +41,7 @@ from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_
     verdict,
     verification_increments,
 )
-from sgbelief.graph.provenance import EntryStatus, EntryVerdict
+from sgbelief.graph.provenance import EntryRecord, EntryStatus, EntryVerdict
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
@@ -158,13 +159,12 @@ class CalibratedOperator(BaseOperator):
                 consensus.refit()
             outcomes: list[TargetOutcome] = []
             verified: list[tuple[int, str]] = []  # (y, calibration context) for step 5
-            counts = [0, 0, 0, 0, 0]  # targets, below tau_T, committed, quarantined, refused
+            tally: Counter[Action] = Counter()  # targets per action (below tau_T, committed, quarantined, refused)
             for node, mass in event.targets.items():
-                counts[0] += 1
                 label = self._geometric_label(channel, node, event)
                 y = self._outcome(event.predicate, label)
                 if mass <= self.config.tau_t:  # discarded; its verdict is only reported
-                    counts[1] += 1
+                    tally[Action.BELOW_THRESHOLD] += 1
                     if consensus is not None and label is not None:  # the channel still saw v
                         consensus.add_label(node, event.t, label)
                     context = self._context(event, self._claims_so_far(graph.provenance, node, event.predicate))
@@ -178,9 +178,10 @@ class CalibratedOperator(BaseOperator):
                     consensus.add_label(node, event.t, label)
                 action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified, label, consensus)
                 resolutions += res
-                counts[{Action.COMMITTED: 2, Action.QUARANTINED: 3, Action.REFUSED: 4}[action]] += 1
+                tally[action] += 1
                 outcomes.append(TargetOutcome(node, mass, v, action, da, db))
-            self._add_totals(1, *counts)
+            self._add_totals(1, tally.total(), tally[Action.BELOW_THRESHOLD], tally[Action.COMMITTED],
+                             tally[Action.QUARANTINED], tally[Action.REFUSED])
             self._feed_calibration(event, verified)
             if resolutions:
                 self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
@@ -209,13 +210,15 @@ class CalibratedOperator(BaseOperator):
             self._pair_slice(pred).add_outcome(a / (a + b), y, cfg.calibration.min_refit, cfg.calibration.refit_growth)
             if self.observes_geometry:
                 ga, gb = verification_increments(y, cfg.w0 * mass)
-                prov.record(node, pred, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1 if y == 1 else -1,
-                            EntryVerdict.GEOMETRIC, c)
+                prov.append(EntryRecord(node=node, predicate=pred, event_id=event.id, t=event.t, d_alpha=ga,
+                                        d_beta=gb, status=EntryStatus.COMMITTED, stance=1 if y == 1 else -1,
+                                        verdict=EntryVerdict.GEOMETRIC, confidence=c))
                 a, b = a + ga, b + gb
         da, db = claim_increments(lam, evidence_weight(cfg.w0, kappa, mass))  # Eq. 3
         if self.check_compatibility and v is _CONTRA:  # refusal (Property 2)
             stance = -1 if asserts else 1  # geometry's stance opposes the claim
-            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.REFUSED, stance, code, c)
+            prov.append(EntryRecord(node=node, predicate=pred, event_id=event.id, t=event.t, d_alpha=da, d_beta=db,
+                                    status=EntryStatus.REFUSED, stance=stance, verdict=code, confidence=c))
             resolutions += queues.quarantine_feedback(prov, node, pred, stance, event.id, event.t)
             return Action.REFUSED, v, 0.0, 0.0, resolutions
         stance = stance_of(lam)
@@ -224,10 +227,12 @@ class CalibratedOperator(BaseOperator):
             resolutions += fb
             a, b = prov.alpha_beta(node, pred)
         if revision_kl_exceeds(a, b, da, db, cfg.tau_rev):  # revision: quarantine in Q
-            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.QUARANTINED, stance, code, c)
+            prov.append(EntryRecord(node=node, predicate=pred, event_id=event.id, t=event.t, d_alpha=da, d_beta=db,
+                                    status=EntryStatus.QUARANTINED, stance=stance, verdict=code, confidence=c))
             action, da, db = Action.QUARANTINED, 0.0, 0.0
         else:
-            prov.record(node, pred, event.id, event.t, da, db, EntryStatus.COMMITTED, stance, code, c)
+            prov.append(EntryRecord(node=node, predicate=pred, event_id=event.id, t=event.t, d_alpha=da, d_beta=db,
+                                    status=EntryStatus.COMMITTED, stance=stance, verdict=code, confidence=c))
             action = Action.COMMITTED
             if self.excludes_rivals and da > 0.0:
                 self._exclude_rivals(prov, node, pred, event, da)
@@ -291,8 +296,9 @@ class CalibratedOperator(BaseOperator):
         seen = self._label_seen_of(prov)
         ga, gb = verification_increments(1, self.config.w0 * mass)
         for psi in label_observations(self.vocabulary.asserted_by(label), event.predicate, node, event.t, seen):
-            prov.record(node, psi, event.id, event.t, ga, gb, EntryStatus.COMMITTED, 1, EntryVerdict.GEOMETRIC,
-                        event.confidence)
+            prov.append(EntryRecord(node=node, predicate=psi, event_id=event.id, t=event.t, d_alpha=ga, d_beta=gb,
+                                    status=EntryStatus.COMMITTED, stance=1, verdict=EntryVerdict.GEOMETRIC,
+                                    confidence=event.confidence))
 
     def _exclude_rivals(self, prov: ProvenanceStore, node: Any, pred: str, event: EvidenceEvent, d_alpha: float) -> None:
         """``exclusive_evidence: rivals``: the committed claim's d_alpha is evidence against each class
@@ -300,8 +306,9 @@ class CalibratedOperator(BaseOperator):
         ea, eb = exclusion_increments(d_alpha)
         for psi in self.vocabulary.exclusive_with(pred):  # type: ignore[union-attr]
             if (node, psi) in prov:
-                prov.record(node, psi, event.id, event.t, ea, eb, EntryStatus.COMMITTED, -1, EntryVerdict.EXCLUSION,
-                            event.confidence)
+                prov.append(EntryRecord(node=node, predicate=psi, event_id=event.id, t=event.t, d_alpha=ea,
+                                        d_beta=eb, status=EntryStatus.COMMITTED, stance=-1,
+                                        verdict=EntryVerdict.EXCLUSION, confidence=event.confidence))
 
     def _feed_calibration(self, event: EvidenceEvent, verified: list[tuple[int, str]]) -> None:
         """Alg. 1 line 21: the event's verification outcomes join the buffer after all its targets."""
