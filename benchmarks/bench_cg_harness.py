@@ -76,9 +76,11 @@ def main(argv: list[str] | None = None) -> int:
                   f"merge with - without, median over frames {dm:+.1f} ms = {100 * dm / med_v:+.1f} % of the step")
         print(f"[{gen}] {args.operator:<8} channel={ch:<9} acc {r.accuracy:.3f}  mIoU {r.miou:.3f}  "
               f"objects {r.n_objects}  unknown {s.unknown}  fusion {np.mean(r.fusion_ms):.1f} ms/frame  "
-              f"({time.perf_counter() - t0:.0f} s)")
+              f"vocabulary from {backend.vocabulary_source}  ({time.perf_counter() - t0:.0f} s)")
         out["runs"].append({"channel": ch, "operator": args.operator, "accuracy": r.accuracy, "miou": r.miou,
-                            "objects": r.n_objects, "unknown": s.unknown, "fusion_ms": float(np.mean(r.fusion_ms))})
+                            "objects": r.n_objects, "unknown": s.unknown, "fusion_ms": float(np.mean(r.fusion_ms)),
+                            "vocabulary_source": backend.vocabulary_source,
+                            "channel_labels": s.channel, "differing": len(s.differing)})
         if args.objects:
             out["runs"][-1].update(_per_frame(r))
     if args.json:

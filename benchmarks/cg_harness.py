@@ -560,9 +560,13 @@ def _miou(objects: Any, labels: list[str], truth: list[int], world: World) -> fl
     return float(np.mean([tp[c] / max(tp[c] + fp[c] + fn[c], 1) for c in gts]))
 
 
-def make_backend(operator: str, channel: Any, *, operator_config: Any = None, classes: list[str] | None = None) -> Any:
-    from sgbelief.adapters.conceptgraphs import ClassVocabulary, ConceptGraphsBackend
+def make_backend(operator: str, channel: Any, *, operator_config: Any = None) -> Any:
+    """The backend built exactly as the README shows: an operator name, a context, a channel (and an
+    operator config only when an experiment names one). No vocabulary and no class list: the
+    backend learns the class list from ConceptGraphs (the ``class_names`` the run hands
+    ``gobs_to_detection_list`` on main, the class holder given to
+    ``make_detection_list_from_pcd_and_gobs`` on ali-dev)."""
+    from sgbelief.adapters.conceptgraphs import ConceptGraphsBackend
 
-    vocab = ClassVocabulary.open_vocabulary(classes or CLASSES, taxonomy="indoor", ignore=BG)
-    return ConceptGraphsBackend(operator, vocabulary=vocab, context="harness-detector", channel=channel,
-                                operator_config=operator_config, class_names=classes or CLASSES)
+    extra = {} if operator_config is None else {"operator_config": operator_config}
+    return ConceptGraphsBackend(operator, context="harness-detector", channel=channel, **extra)

@@ -118,6 +118,11 @@ class LabelImageChannel:
     :meth:`label_detection` reads a ConceptGraphs detection dict (``mask[k]``, ``image_idx[k]``);
     the backend calls it for the claim ``k`` it routes. ``label(node, t)`` has no mask and returns None.
     ``keep_frames`` bounds how many frames are held (the oldest is dropped first).
+
+    ``vocabulary`` (a :class:`~sgbelief.fusion.compatibility.SubsumptionTable`, or anything with a
+    ``table()`` such as the ConceptGraphs backend's ``ClassVocabulary``): the class list is checked
+    against it when the channel is built (:meth:`check_vocabulary`); the ConceptGraphs backend
+    checks it against its own vocabulary in any case.
     """
 
     def __init__(
@@ -125,6 +130,7 @@ class LabelImageChannel:
         images: Mapping[int, Any] | Callable[[int], Any] | None = None,
         *,
         classes: Sequence[str] | Mapping[int, str] | None = None,
+        vocabulary: Any = None,
         min_purity: float = 0.5,
         min_pixels: int = 20,
         ignore_ids: Iterable[int] = (),
@@ -155,6 +161,22 @@ class LabelImageChannel:
         self.keep_frames = keep_frames
         self.mask_key = mask_key
         self.frame_key = frame_key
+        if vocabulary is not None:
+            self.check_vocabulary(vocabulary)
+
+    def check_vocabulary(self, vocabulary: Any) -> list[str]:
+        """Check the class list against ``vocabulary`` (a subsumption table, or an object with
+        ``table()``), spellings folded (case, plural, space / hyphen / underscore). Raises
+        :class:`~sgbelief.errors.ChannelMismatchError` when no class name matches; warns
+        (``UnmatchedLabelWarning``) naming those that match nothing; returns them."""
+        from sgbelief.fusion.label_match import check_class_names
+
+        table = vocabulary.table() if hasattr(vocabulary, "table") and callable(vocabulary.table) else vocabulary
+        if table is None or not self.classes:
+            return []
+        names = list(dict.fromkeys(n for i, n in self.classes.items()
+                                   if i not in self.ignore_ids and n not in self.ignore_labels))
+        return check_class_names(names, table, what="LabelImageChannel class list")
 
     def set_frame(self, t: int, image: Any, instance_classes: Mapping[int, Any] | None = None) -> None:
         """The label image of frame ``t`` (and, for an instance image, its instance -> class table)."""

@@ -6,83 +6,24 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
+from sgbelief.adapters.conceptgraphs.channel_labels import LabelResolver
+from sgbelief.adapters.conceptgraphs.claims import (
+    DEFAULT_LABEL_KEY,
+    Claim,
+    DetectionLabelFn,
+    EventChannel,
+    read_claims,
+)
 from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
 from sgbelief.adapters.conceptgraphs.identity import IdentityMap
-from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
+from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClaimCounts, ClassSummary
+from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary, normalise_class_name
 
-#: detection-dict key a segmenter-running pipeline may set to the geometric label of that detection
-DEFAULT_LABEL_KEY = "geometric_label"
-
-DetectionLabelFn = Callable[[dict, Any, int], "str | None"]
-
-
-class Claim(NamedTuple):
-    """One per-detection claim read from a ConceptGraphs object dict."""
-
-    class_id: int | None
-    class_name: str
-    confidence: float
-    t: int
-
-
-class _EventChannel:
-    """Geometric channel for one event: the detection's own label first, then the configured channel.
-
-    A configured channel with ``label_detection(detection, index, t)`` (a :class:`DetectionChannel`
-    such as :class:`~sgbelief.fusion.channel.LabelImageChannel`) is asked about entry ``index`` of
-    the detection dict; any other channel through ``label(node, t)``.
-    """
-
-    __slots__ = ("_label", "_detection", "_fallback", "_fn", "_index", "answers")
-
-    def __init__(self, label: str | None, detection: dict | None, fallback: Any, fn: DetectionLabelFn | None,
-                 index: int = 0) -> None:
-        self._label = label
-        self._detection = detection
-        self._fallback = fallback
-        self._fn = fn
-        self._index = index
-        #: the labels this channel gave, per node asked (the operator asks once per target)
-        self.answers: dict[Any, str] = {}
-
-    def label(self, node: Any, t: int) -> str | None:
-        value = self._ask(node, t)
-        if value is not None:
-            self.answers[node] = value
-        return value
-
-    def _ask(self, node: Any, t: int) -> str | None:
-        if self._label is not None:
-            return self._label
-        if self._fn is not None and self._detection is not None:
-            value = self._fn(self._detection, node, t)
-            if value is not None:
-                return value
-        fallback = self._fallback
-        if fallback is not None:
-            by_detection = getattr(fallback, "label_detection", None)
-            if by_detection is not None and self._detection is not None:
-                value = by_detection(self._detection, self._index, t)
-                if value is not None:
-                    return value
-            return fallback.label(node, t)
-        return None
-
-
-class BackendSummary(NamedTuple):
-    """Counts over the backend's live map objects (see :meth:`ConceptGraphsBackend.summary`)."""
-
-    objects: int  #: live (not merged away, not filtered) objects the backend tracks
-    labelled: int  #: objects whose label comes from a committed predicate
-    unknown: int  #: objects left unknown: nothing commits (``unknown_label`` / ``unknown_class_id``)
-    filtered: int  #: objects ConceptGraphs filtered (marked ``cg_filtered``)
-    detections: int  #: per-detection claims routed
-    events: int  #: evidence entries in the graph
-
+__all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "DetectionLabelFn", "MapBeliefs"]
 
 class MapBeliefs:
     """The belief side of a ConceptGraphs map: which graph node each map object is, the evidence its
@@ -95,7 +36,8 @@ class MapBeliefs:
 
     Args:
         operator: a FusionOperator instance.
-        vocabulary: the :class:`ClassVocabulary` mapping class names to predicates.
+        vocabulary: the :class:`ClassVocabulary` mapping class names to predicates; None: not known
+            yet (:meth:`set_vocabulary` gives it before the first claim, else :meth:`vocabulary_needed`).
         graph: the scene graph the beliefs live in.
         seed_from_graph: the graph may already hold evidence the backend did not route (a graph
             handed in by the caller): a node's pre-existing beliefs are read once, on first use.
@@ -119,7 +61,7 @@ class MapBeliefs:
     def __init__(
         self,
         operator: Any,
-        vocabulary: ClassVocabulary,
+        vocabulary: ClassVocabulary | None,
         graph: Any,
         *,
         seed_from_graph: bool = False,
@@ -138,9 +80,16 @@ class MapBeliefs:
         from sgbelief.fusion.channel import NullChannel
         from sgbelief.fusion.operators.base import BaseOperator
 
-        self.vocabulary = vocabulary
-        self.table = vocabulary.table()
         self.operator = operator
+        #: the operator's own vocabulary is the backend's (set again whenever the vocabulary is)
+        self._share_table = getattr(operator, "vocabulary", None) is None
+        self.vocabulary: ClassVocabulary | None = None
+        self.table: Any = None
+        #: resolves, counts and checks the geometric labels (channel_labels.LabelResolver)
+        self.labels = LabelResolver(None)
+        self._predicate_cache: dict[str, str | None] = {}
+        if vocabulary is not None:
+            self.set_vocabulary(vocabulary)
         cfg = getattr(operator, "config", None)
         self.tau = float(tau if tau is not None else getattr(cfg, "tau", 0.5))
         self.tau_t = float(tau_t if tau_t is not None else getattr(cfg, "tau_t", 0.1))
@@ -172,8 +121,14 @@ class MapBeliefs:
         self._preds_per_node: dict[Any, set[str]] = {}
         #: predicates only the geometric labels asserted at each node (candidates when no claimed one commits)
         self._label_preds_per_node: dict[Any, set[str]] = {}
-        self._predicate_cache: dict[str, str | None] = {}
+        #: the (resolved) labels the channel gave at each node, counted: a merged predicate writes
+        #: the channel's own name (table, not desk, for is_table_or_desk)
+        self._labels_per_node: dict[Any, Counter[str]] = {}
         self._seeded: set[Any] = set()
+        #: per detector class name: claims and what the channel said of them (summary())
+        self._claim_counts: dict[str, ClaimCounts] = {}
+        #: a channel is configured (or a detection carried its own label): checked within 20 frames
+        self._has_channel = self.channel is not None or self.channel_fn is not None
         self._detections_per_node: Counter[Any] = Counter()
         self._routed_detections = 0
         self._last_t = None
@@ -193,31 +148,27 @@ class MapBeliefs:
         # FusionOperator gets the protocol's update(graph, event, channel)
         self._skip_reports = isinstance(operator, BaseOperator)
 
+    # ------------------------------------------------------------------ vocabulary
+    def set_vocabulary(self, vocabulary: ClassVocabulary) -> None:
+        """Use ``vocabulary`` from now on (its table also becomes the operator's, when the operator
+        had none of its own). Claims already routed keep the predicates they were given."""
+        self.vocabulary = vocabulary
+        self.table = vocabulary.table()
+        if self._share_table:
+            self.operator.vocabulary = self.table
+        self.labels.set_table(self.table)
+        self._predicate_cache.clear()
+
+    def vocabulary_needed(self, class_name: str) -> ClassVocabulary:
+        """Called when a claim arrives before any vocabulary was given; returns the one to use.
+        :class:`~sgbelief.adapters.conceptgraphs.backend.ConceptGraphsBackend` derives it from the
+        class names; here it is an error."""
+        raise ValueError(f"claim of class {class_name!r} routed before the backend has a vocabulary")
+
     # ------------------------------------------------------------------ reading CG dicts
     def claims_of(self, obj: Mapping[str, Any]) -> list[Claim]:
         """The per-detection (class, confidence, frame) history stored in a CG object dict."""
-        ids, confs, frames = _seq(obj.get("class_id")), _seq(obj.get("conf")), _seq(obj.get("image_idx"))
-        names = obj.get("class_name")
-        n = max(len(ids), len(confs))
-        out: list[Claim] = []
-        for k in range(n):
-            cid = _as_int(ids[k]) if k < len(ids) else None
-            if isinstance(names, list) and k < len(names):
-                name = str(names[k])
-            elif cid is not None and cid in self.class_names:
-                name = self.class_names[cid]
-            elif isinstance(names, str) and (n == 1 or not ids):
-                name = names
-            elif cid is not None:
-                name = str(cid)
-            else:
-                continue
-            if cid is not None and cid >= 0 and name != str(cid):
-                self.class_names.setdefault(cid, name)
-            conf = _as_float(confs[k]) if k < len(confs) and confs[k] is not None else 1.0
-            t = _as_int(frames[k]) if k < len(frames) else 0
-            out.append(Claim(cid, name, min(max(conf, 0.0), 1.0), t if t is not None else 0))
-        return out
+        return read_claims(obj, self.class_names)
 
     # ------------------------------------------------------------------ identity
     def node_of(self, obj: Mapping[str, Any]) -> Any | None:
@@ -277,10 +228,12 @@ class MapBeliefs:
                 continue
             conf = self.confidence_map(claim.confidence) if self.confidence_map else claim.confidence
             label = geo_labels[k] if k < len(geo_labels) else None
+            if label is not None:
+                self._has_channel = True
             if self.table is not None and pred not in self.table:
                 channel: Any = self._null  # no verification possible for this predicate
             else:
-                channel = _EventChannel(label, det, self.channel, self.channel_fn, k)
+                channel = EventChannel(label, det, self.channel, self.channel_fn, k, self.labels.resolve)
             if self._last_t is not None and claim.t > self._last_t:
                 resolved = self.operator.tick(self.graph, claim.t)
                 if resolved:
@@ -294,10 +247,13 @@ class MapBeliefs:
                 report = self.operator.update(self.graph, event, channel)
             if report.resolutions:
                 self._note_resolutions(report.resolutions)
+            self._count_claim(claim.class_name, pred, float(conf), channel)
             if channel is not self._null and channel.answers:
                 # comod observes what the geometric label asserts (geometric_evidence: label): a
                 # label is a candidate class of its node even when no detection named it
                 self._note_label_predicates(channel.answers)
+            if self._has_channel and channel is not self._null and channel.asked:
+                self.labels.note_frame(int(claim.t))
             if self.keep_reports:
                 self.reports.append(report)
             n_events += 1
@@ -307,6 +263,25 @@ class MapBeliefs:
             changed.add(node)
         self._routed_detections += len(claims)
         return n_events
+
+    def _count_claim(self, class_name: str, pred: str, conf: float, channel: Any) -> None:
+        """Count one routed claim for :meth:`summary`: verified, refused or unverifiable, by the
+        verdict of the first label the channel gave for it (and the claim's raw sign)."""
+        counts = self._claim_counts.get(class_name)
+        if counts is None:
+            counts = self._claim_counts[class_name] = ClaimCounts()
+        counts.claims += 1
+        answers = None if channel is self._null else channel.answers
+        if not answers:
+            counts.unverifiable += 1
+            return
+        y = self.table.outcome(pred, next(iter(answers.values()))) if self.table is not None else None
+        if y is None:
+            counts.unverifiable += 1
+        elif (y == 1) == (conf >= 0.5):
+            counts.verified += 1
+        else:
+            counts.refused += 1
 
     def _note_label_predicates(self, answers: Mapping[Any, str]) -> None:
         """Note the predicates each answered label asserts as its node's geometric candidates."""
@@ -319,8 +294,10 @@ class MapBeliefs:
                 preds = self._label_preds_per_node.get(node)
                 if preds is None:
                     self._label_preds_per_node[node] = set(asserted)
+                    self._labels_per_node[node] = Counter((label,))
                 else:
                     preds.update(asserted)
+                    self._labels_per_node[node][label] += 1
 
     def _note_resolutions(self, resolutions: Iterable[Any]) -> None:
         """A queued event left its queue (released, corroborated, ...): its node's beliefs may move."""
@@ -387,6 +364,7 @@ class MapBeliefs:
         names.update(self._names_per_node.pop(raw, Counter()))
         self._preds_per_node.setdefault(keep, set()).update(self._preds_per_node.pop(raw, ()))
         self._label_preds_per_node.setdefault(keep, set()).update(self._label_preds_per_node.pop(raw, ()))
+        self._labels_per_node.setdefault(keep, Counter()).update(self._labels_per_node.pop(raw, Counter()))
         self.identity.absorb(raw, keep)
         self._changed.add(keep)
 
@@ -410,6 +388,7 @@ class MapBeliefs:
             self.graph.remove_node(node)
             self._preds_per_node.pop(node, None)
             self._label_preds_per_node.pop(node, None)
+            self._labels_per_node.pop(node, None)
         else:
             self.graph.nx.nodes[node]["cg_filtered"] = True
         self.identity.retire(node)
@@ -433,7 +412,12 @@ class MapBeliefs:
         try:
             return self._predicate_cache[class_name]
         except KeyError:
-            pred = self._predicate_cache[class_name] = self.vocabulary.predicate(class_name)
+            vocab = self.vocabulary
+            if vocab is None or getattr(self, "_growing", False):
+                vocab = self.vocabulary_needed(class_name)
+                if vocab is not self.vocabulary:
+                    self.set_vocabulary(vocab)
+            pred = self._predicate_cache[class_name] = vocab.predicate(class_name)
             return pred
 
     def _predicates_of(self, node: Any) -> set[str]:
@@ -497,11 +481,39 @@ class MapBeliefs:
                     return key
             cid = next((i for i, n in self.class_names.items() if n == name), None)
             return (cid, name)
+        if self._covers_several(pred):  # a merged predicate: the channel's own name, when it has one
+            own = self._channel_class(node, pred, counts)
+            if own is not None:
+                return own
         best, best_n = None, 0
         for key, n in counts.items():  # most frequent; ties keep first-seen order
             if n > best_n and predicate(key[1]) == pred:
                 best, best_n = key, n
         return best if best is not None else self._class_named_by(pred)
+
+    def _covers_several(self, pred: str) -> bool:
+        """Whether ``pred`` stands for several class names (a merged group: table, desk, ...)."""
+        table = self.table
+        spec = table.specs.get(pred) if table is not None else None
+        return spec is not None and len(spec.aliases) > 1
+
+    def _channel_class(self, node: Any, pred: str, counts: Counter[tuple[int | None, str]]) -> tuple[int | None, str] | None:
+        """(class id, name) of the label the channel gave most often at ``node`` among those naming
+        ``pred``'s classes (the detector's spelling and id when a claim used that name), or None."""
+        seen = self._labels_per_node.get(node)
+        vocab = self.vocabulary
+        if not seen or vocab is None:
+            return None
+        for label, _n in seen.most_common():
+            if vocab.predicate(label) != pred:
+                continue
+            key = normalise_class_name(label)
+            for cid, name in counts:
+                if normalise_class_name(name) == key:
+                    return (cid, name)
+            cid = next((i for i, n in sorted(self.class_names.items()) if normalise_class_name(n) == key), None)
+            return (cid, self.class_names[cid] if cid is not None else label)
+        return None
 
     def _class_named_by(self, pred: str) -> tuple[int | None, str] | None:
         """(class id, name) for a predicate no detection of the node named (the geometric labels
@@ -543,8 +555,10 @@ class MapBeliefs:
         ConceptGraphsBackend` adds its garbage-collector checkpoints here."""
 
     def summary(self, objects: Sequence[Mapping[str, Any]] | None = None) -> BackendSummary:
-        """Counts of labelled and ``unknown`` objects (nothing commits), over ``objects`` (a map
-        object list) or every live node the backend tracks."""
+        """What the backend did, over ``objects`` (a map object list) or every live node it tracks:
+        objects labelled and left ``unknown``, and per detector class the claims (verified, refused,
+        unverifiable by the channel) and the objects whose vote is that class (committed, unknown,
+        written label differing from the vote). See :class:`~.summary.BackendSummary`."""
         if objects is not None:
             nodes = [n for n in (self.node_of(o) for o in objects) if n is not None and n in self.graph]
         else:
@@ -552,10 +566,32 @@ class MapBeliefs:
         attrs = self.graph.nx.nodes
         filtered = sum(1 for n in nodes if attrs[n].get("cg_filtered"))
         live = [n for n in nodes if not attrs[n].get("cg_filtered")]
-        labelled = sum(1 for n in live if self.committed_class(n) is not None)
+        per_class: dict[str, dict[str, int]] = {
+            name: {"claims": c.claims, "verified": c.verified, "refused": c.refused, "unverifiable": c.unverifiable}
+            for name, c in self._claim_counts.items()}
+        differing: list[dict[str, Any]] = []
+        labelled = 0
+        for n in live:
+            hit = self.committed_class(n)
+            labelled += hit is not None
+            names = self._names_per_node.get(n)
+            vote = _vote(names) if names else None
+            if vote is None:
+                continue
+            row = per_class.setdefault(vote, {})
+            key = "committed" if hit is not None else "unknown"
+            row[key] = row.get(key, 0) + 1
+            written = self.unknown_label if hit is None else hit[1]
+            if written != vote:
+                row["differ"] = row.get("differ", 0) + 1
+                differing.append({"node": str(n), "vote": vote, "label": written})
+        vocab = self.vocabulary
         return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
                               filtered=filtered, detections=self._routed_detections,
-                              events=self.evidence_count())
+                              events=self.evidence_count(),
+                              classes={k: ClassSummary(**v) for k, v in sorted(per_class.items())},
+                              differing=differing, channel=self.labels.report() if self._has_channel else {},
+                              vocabulary=getattr(vocab, "name", "") if vocab is not None else "")
 
     def evidence_count(self) -> int:
         return int(self.graph.evidence_count())
@@ -566,25 +602,10 @@ class MapBeliefs:
         return self._routed_detections
 
 
-def _seq(value: Any) -> list[Any]:
-    """A per-detection field as a list (None -> []; numpy arrays have no truth value)."""
-    if value is None:
-        return []
-    if isinstance(value, list):
-        return value
-    return list(value)
-
-
-def _as_int(value: Any) -> int | None:
-    if type(value) is int:
-        return value
-    try:
-        return int(np.asarray(value).item())
-    except (TypeError, ValueError):
-        return None
-
-
-def _as_float(value: Any) -> float:
-    if type(value) is float:
-        return value
-    return float(np.asarray(value).item())
+def _vote(names: Counter[tuple[int | None, str]]) -> str:
+    """ConceptGraphs' majority class name of an object's claims (ties to the first seen)."""
+    best, best_n = "", 0
+    for (_cid, name), n in names.items():
+        if n > best_n:
+            best, best_n = name, n
+    return best
