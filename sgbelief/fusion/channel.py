@@ -235,7 +235,14 @@ class LabelImageChannel:
             values = image[m]
         if values.size < self.min_pixels:
             return None
-        ids, counts = np.unique(values, return_counts=True)
+        lo, hi = int(values.min()), int(values.max())
+        if hi - lo < 65536:  # small id range (class or instance ids): a histogram, not a sort
+            hist = np.bincount((values - lo if lo else values).astype(np.intp, copy=False), minlength=1)
+            ids = np.flatnonzero(hist)
+            counts = hist[ids]
+            ids = ids + lo
+        else:
+            ids, counts = np.unique(values, return_counts=True)
         totals: dict[str, int] = {}
         labelled = 0
         for v, c in zip(ids.tolist(), counts.tolist()):

@@ -229,7 +229,9 @@ class ConceptGraphsBackend(MapBeliefs):
         self._froze = True
 
     def end_frame(self) -> None:
-        """Called by the patched per-frame merge functions: the per-frame housekeeping hook."""
+        """Called by the patched per-frame merge functions: the per-frame housekeeping hook (the
+        frame's queued events applied, then the garbage-collector checkpoint if enabled)."""
+        self.flush()
         if self.gc_checkpoints:
             self.gc_checkpoint()
 
@@ -300,6 +302,7 @@ class ConceptGraphsBackend(MapBeliefs):
 
         from sgbelief.graph.persistence import atomic_write_text, save_graph
 
+        self.flush()
         out = save_graph(self.graph, path)
         atomic_write_text(summary_path(out), json.dumps(self.summary().to_dict(), indent=1))
         return out

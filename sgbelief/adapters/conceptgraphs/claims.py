@@ -120,6 +120,8 @@ def _seq(value: Any) -> list[Any]:
 def _as_int(value: Any) -> int | None:
     if type(value) is int:
         return value
+    if isinstance(value, np.integer):
+        return int(value)
     try:
         return int(np.asarray(value).item())
     except (TypeError, ValueError):
@@ -129,4 +131,6 @@ def _as_int(value: Any) -> int | None:
 def _as_float(value: Any) -> float:
     if type(value) is float:
         return value
+    if isinstance(value, np.floating):
+        return float(value)
     return float(np.asarray(value).item())

@@ -18,6 +18,7 @@ from sgbelief.adapters.conceptgraphs.generation_base import (
     NEG_INF,
     BeliefLabelledObject,
     GenerationFunctions,
+    as_numpy,
     counter_update,
     same_list_type,
 )
@@ -95,9 +96,17 @@ class AliDevGeneration(GenerationFunctions):
                           dbscan_remove_noise: bool, dbscan_eps: float, dbscan_min_points: int,
                           spatial_sim_type: str, device: Any) -> Any:
         """Merge matched detections (beliefs spread with the scores of the last match call)."""
+        with self.backend.batch():  # the frame's events: one update_many call
+            return self._merge_obj_matches(detection_list, objects, match_indices, downsample_voxel_size,
+                                           dbscan_remove_noise, dbscan_eps, dbscan_min_points, spatial_sim_type,
+                                           device)
+
+    def _merge_obj_matches(self, detection_list: Any, objects: Any, match_indices: list, downsample_voxel_size: float,
+                           dbscan_remove_noise: bool, dbscan_eps: float, dbscan_min_points: int,
+                           spatial_sim_type: str, device: Any) -> Any:
         backend = self.backend
         last = self.last_match
-        sims = last[0] if last is not None and last[1] is match_indices else None
+        sims = as_numpy(last[0]) if last is not None and last[1] is match_indices else None
         thr = last[2] if sims is not None else NEG_INF
         n_before = len(objects)
         touched = self.frame_start(objects)
@@ -119,6 +128,8 @@ class AliDevGeneration(GenerationFunctions):
                 targets = {backend.ensure_node(objects[j]): 1.0}
                 touched.add(j)
             backend.route_detection(det, targets)
+            if backend.pending_dict(objects[j]):  # a queued claim still reads this dict: apply first
+                backend.flush()
             objects[j] = self.geo_merge(objects[j], det, downsample_voxel_size, dbscan_remove_noise, dbscan_eps,
                                         dbscan_min_points, spatial_sim_type, device, False)
         if tracker is not None:  # ConceptGraphs' MappingTracker counters, updated as the original does

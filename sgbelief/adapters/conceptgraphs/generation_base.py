@@ -71,6 +71,13 @@ class BeliefLabelledObject(dict):
         return copy.deepcopy(dict(self), memo)
 
 
+def as_numpy(scores: Any) -> np.ndarray:
+    """An association-score matrix (a torch tensor or an array) as a float numpy array."""
+    if hasattr(scores, "detach"):
+        scores = scores.detach().cpu().numpy()
+    return np.asarray(scores, dtype=float)
+
+
 def vote_dtype_scalar(class_ids: Any, cid: int) -> Any:
     """``cid`` as the numpy scalar type ``np.unique(np.asarray(class_ids))`` would give (int64 if not integral)."""
     dtype = getattr(class_ids, "dtype", None)
@@ -152,6 +159,7 @@ class GenerationFunctions:
             node = backend.ensure_node(obj)
             backend.refresh_geometry(obj)
             seen.append((k, node))
+        backend.flush()
         self.write_labels(objects, seen, backend.take_changed_nodes())
 
     def write_labels(self, objects: Any, seen: list[tuple[int, Any]], changed: set[Any]) -> None:
@@ -177,19 +185,31 @@ class GenerationFunctions:
     def assign(self, detection_list: Any, objects: Any, agg_sim: Any, threshold: float, merge_one: MergeOne) -> Any:
         """Association loop: a new object when the row has no candidate, else spread the beliefs
         over the candidates and merge the geometry into the argmax."""
+        with self.backend.batch():  # the frame's events: one update_many call
+            return self._assign(detection_list, objects, agg_sim, threshold, merge_one)
+
+    def _assign(self, detection_list: Any, objects: Any, agg_sim: Any, threshold: float, merge_one: MergeOne) -> Any:
         backend = self.backend
         touched = self.frame_start(objects)
-        for i in range(agg_sim.shape[0]):
-            row = agg_sim[i]
+        scores = as_numpy(agg_sim)  # one conversion per frame, not one per row
+        n_rows = scores.shape[0]
+        if scores.shape[1]:
+            best_of, max_of = scores.argmax(axis=1).tolist(), scores.max(axis=1).tolist()
+        else:
+            best_of, max_of = [0] * n_rows, [NEG_INF] * n_rows
+        for i in range(n_rows):
             det = detection_list[i]
-            if float(row.max()) <= threshold or float(row.max()) == NEG_INF:
+            top = max_of[i]
+            if top <= threshold or top == NEG_INF:
                 objects.append(det)
                 backend.ensure_node(det)
                 touched.add(len(objects) - 1)
                 continue
-            j = int(row.argmax())
-            targets = backend.targets_for(row, j, objects, threshold, touched)
+            j = best_of[i]
+            targets = backend.targets_for(scores[i], j, objects, threshold, touched)
             backend.route_detection(det, targets)
+            if backend.pending_dict(objects[j]):  # a queued claim still reads this dict: apply first
+                backend.flush()
             objects[j] = merge_one(objects[j], det)
         self.sync_labels(objects, touched)
         backend.end_frame()

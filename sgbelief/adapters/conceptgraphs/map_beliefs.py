@@ -4,8 +4,9 @@ they are swapped in (:mod:`.generation_main`, :mod:`.generation_ali_dev`, :mod:`
 
 from __future__ import annotations
 
+import contextlib
 from collections import Counter
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -20,12 +21,15 @@ from sgbelief.adapters.conceptgraphs.claims import (
 )
 from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
 from sgbelief.adapters.conceptgraphs.identity import IdentityMap
-from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClaimCounts, ClassSummary
-from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary, normalise_class_name
+from sgbelief.adapters.conceptgraphs.labels_out import LabelReader
+from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClaimCounts
+from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
+from sgbelief.errors import InvalidEventError
+from sgbelief.fusion.events import EvidenceEvent, next_event_id
 
 __all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "DetectionLabelFn", "MapBeliefs"]
 
-class MapBeliefs:
+class MapBeliefs(LabelReader):
     """The belief side of a ConceptGraphs map: which graph node each map object is, the evidence its
     detections routed there, and the label the beliefs give it.
 
@@ -137,6 +141,8 @@ class MapBeliefs:
         self._changed: set[Any] = set()
         self.reports: list[Any] = []
         self.keep_reports = False
+        #: when a list: every routed (event, {node: label}) is appended (benchmarks replay them)
+        self.event_log: list[tuple[Any, dict[Any, str]]] | None = None
         self.active = True
         if isinstance(label_rule, str):
             if label_rule not in ("most_frequent", "first"):
@@ -147,6 +153,30 @@ class MapBeliefs:
         # sgbelief's own operators take report=False (no per-target reports nobody reads); any other
         # FusionOperator gets the protocol's update(graph, event, channel)
         self._skip_reports = isinstance(operator, BaseOperator)
+        #: routed events waiting for flush(): (event, channel, class name)
+        self._pending: list[tuple[Any, Any, str]] = []
+        self._pending_dicts: set[int] = set()
+        self._batch_open = False
+
+    @property
+    def _batched(self) -> bool:
+        """Events are queued and applied per frame: inside :meth:`batch`, with sgbelief's operators
+        and no per-event reports kept. Elsewhere each routed detection is applied at once."""
+        return self._batch_open and self._skip_reports and not self.keep_reports
+
+    @contextlib.contextmanager
+    def batch(self) -> Iterator[None]:
+        """Queue the events routed inside (a per-frame merge) and apply them in one ``update_many``
+        call at the latest when it ends (:meth:`flush`)."""
+        if self._batch_open:
+            yield
+            return
+        self._batch_open = True
+        try:
+            yield
+        finally:
+            self._batch_open = False
+        self.flush()
 
     # ------------------------------------------------------------------ vocabulary
     def set_vocabulary(self, vocabulary: ClassVocabulary) -> None:
@@ -203,75 +233,119 @@ class MapBeliefs:
 
         Returns the number of events emitted.  Targets with mass <= tau_T are discarded; the
         detection's own geometric label (``label_key``) is consumed and removed from the dict.
+        The events are queued and applied in one ``update_many`` call by :meth:`flush` (at the end
+        of the per-frame merge, and before anything reads or merges the beliefs), in the order they
+        were routed: the map is the one event-by-event updates give.
         """
-        from sgbelief.fusion.events import EvidenceEvent
-
         geo = det.pop(self.label_key, None) if isinstance(det, dict) else None
-        targets = {n: float(m) for n, m in targets.items() if float(m) > self.tau_t}
+        tau_t = self.tau_t
+        targets = {n: float(m) for n, m in targets.items() if float(m) > tau_t}
         claims = self.claims_of(det)
+        geo_labels = geo if isinstance(geo, list) else None
+        names_per_node = self._names_per_node
+        preds_per_node = self._preds_per_node
+        pending = self._pending
+        table = self.table
+        context = self.context
         n_events = 0
-        geo_labels = geo if isinstance(geo, list) else [geo] * len(claims)
         for k, claim in enumerate(claims):
-            pred = self._predicate(claim.class_name)
+            name = claim.class_name
+            pred = self._predicate(name)
+            key = (claim.class_id, name)
             for node in targets:
-                counts = self._names_per_node.get(node)
+                counts = names_per_node.get(node)
                 if counts is None:
-                    counts = self._names_per_node[node] = Counter()
-                counts[(claim.class_id, claim.class_name)] += 1
+                    counts = names_per_node[node] = Counter()
+                counts[key] += 1
                 if pred is not None:
-                    preds = self._preds_per_node.get(node)
+                    preds = preds_per_node.get(node)
                     if preds is None:
-                        self._preds_per_node[node] = {pred}
+                        preds_per_node[node] = {pred}
                     else:
                         preds.add(pred)
             if pred is None or not targets:
                 continue
-            conf = self.confidence_map(claim.confidence) if self.confidence_map else claim.confidence
-            label = geo_labels[k] if k < len(geo_labels) else None
+            conf = claim.confidence
+            if self.confidence_map is not None:
+                conf = _checked_confidence(self.confidence_map(conf))
+            label = geo if geo_labels is None else (geo_labels[k] if k < len(geo_labels) else None)
             if label is not None:
                 self._has_channel = True
-            if self.table is not None and pred not in self.table:
+            if table is not None and pred not in table:
                 channel: Any = self._null  # no verification possible for this predicate
             else:
                 channel = EventChannel(label, det, self.channel, self.channel_fn, k, self.labels.resolve)
-            if self._last_t is not None and claim.t > self._last_t:
-                resolved = self.operator.tick(self.graph, claim.t)
-                if resolved:
-                    self._note_resolutions(resolved)
-            self._last_t = claim.t if self._last_t is None else max(self._last_t, claim.t)
-            event = EvidenceEvent(targets=targets, predicate=pred, confidence=float(conf),
-                                  context=self.context, t=int(claim.t))
-            if self._skip_reports and not self.keep_reports:
-                report = self.operator.update(self.graph, event, channel, report=False)
-            else:
-                report = self.operator.update(self.graph, event, channel)
-            if report.resolutions:
-                self._note_resolutions(report.resolutions)
-            self._count_claim(claim.class_name, pred, float(conf), channel)
-            if channel is not self._null and channel.answers:
-                # comod observes what the geometric label asserts (geometric_evidence: label): a
-                # label is a candidate class of its node even when no detection named it
-                self._note_label_predicates(channel.answers)
-            if self._has_channel and channel is not self._null and channel.asked:
-                self.labels.note_frame(int(claim.t))
-            if self.keep_reports:
-                self.reports.append(report)
+            if claim.t < 0:
+                raise InvalidEventError("t", f"must be a non-negative integer time step, got {claim.t!r}")
+            if not 0.0 <= conf <= 1.0:  # NaN
+                raise InvalidEventError("confidence", f"must be finite and in [0, 1], got {conf!r}")
+            # the event is built from checked parts (targets above tau_T, masses from a normalised
+            # row, a clipped confidence): no re-validation per claim
+            pending.append((EvidenceEvent.trusted(targets, pred, conf, context, claim.t, next_event_id()),
+                            channel, name))
             n_events += 1
+        if n_events:
+            self._pending_dicts.add(id(det))
         changed = self._changed
         for node in targets:
             self._detections_per_node[node] += len(claims)
             changed.add(node)
         self._routed_detections += len(claims)
+        if not self._batched:
+            self.flush()
         return n_events
 
-    def _count_claim(self, class_name: str, pred: str, conf: float, channel: Any) -> None:
+    def flush(self) -> None:
+        """Apply the queued events (one ``update_many`` call), then note what each did: queue
+        resolutions, the labels the channel gave, the per-class counts of :meth:`summary`."""
+        pending = self._pending
+        if not pending:
+            return
+        self._pending = []
+        self._pending_dicts.clear()
+        op, graph = self.operator, self.graph
+        if self._batched:
+            resolutions = op.update_many(graph, [(event, channel) for event, channel, _ in pending])
+            if resolutions:
+                self._note_resolutions(resolutions)
+        else:
+            for event, channel, _name in pending:
+                if not self._skip_reports and self._last_t is not None and event.t > self._last_t:
+                    resolved = op.tick(graph, event.t)
+                    if resolved:
+                        self._note_resolutions(resolved)
+                self._last_t = event.t if self._last_t is None else max(self._last_t, event.t)
+                report = op.update(graph, event, channel) if self.keep_reports or not self._skip_reports \
+                    else op.update(graph, event, channel, report=False)
+                if report.resolutions:
+                    self._note_resolutions(report.resolutions)
+                if self.keep_reports:
+                    self.reports.append(report)
+        null, log, has_channel = self._null, self.event_log, self._has_channel
+        for event, channel, name in pending:
+            answers = None if channel is null else channel.answers
+            self._count_claim(name, event.predicate, event.confidence, answers)
+            if answers:
+                # comod observes what the geometric label asserts (geometric_evidence: label): a
+                # label is a candidate class of its node even when no detection named it
+                self._note_label_predicates(answers)
+            if log is not None:
+                log.append((event, dict(answers) if answers else {}))
+            if has_channel and channel is not null and channel.asked:
+                self.labels.note_frame(event.t)
+
+    def pending_dict(self, obj: Any) -> bool:
+        """Whether a queued event still reads ``obj`` (a detection / object dict): the caller
+        flushes before changing it."""
+        return id(obj) in self._pending_dicts
+
+    def _count_claim(self, class_name: str, pred: str, conf: float, answers: Mapping[Any, str] | None) -> None:
         """Count one routed claim for :meth:`summary`: verified, refused or unverifiable, by the
         verdict of the first label the channel gave for it (and the claim's raw sign)."""
         counts = self._claim_counts.get(class_name)
         if counts is None:
             counts = self._claim_counts[class_name] = ClaimCounts()
         counts.claims += 1
-        answers = None if channel is self._null else channel.answers
         if not answers:
             counts.unverifiable += 1
             return
@@ -309,6 +383,7 @@ class MapBeliefs:
         """Nodes whose beliefs may have changed since the previous call (then forgotten): targets of
         routed events, nodes that absorbed a merge, nodes of queue resolutions. The per-frame merges
         relabel exactly these, so a frame's label work follows its detections, not the map's size."""
+        self.flush()
         changed, self._changed = self._changed, set()
         return changed
 
@@ -321,12 +396,14 @@ class MapBeliefs:
         alone gets mass 1 when no candidate has a positive score.  The caller drops T(v) <= tau_T.
         ``touched``: the list positions of the targeted objects are added to it.
         """
-        scores = np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float).ravel()
+        scores = row if type(row) is np.ndarray and row.dtype == np.float64 else \
+            np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float)
+        scores = scores.ravel()
         n = min(len(scores), len(objects))
         s = scores[:n]
         # candidates found in numpy: the per-detection cost does not grow with the map's size
-        cand = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0)).tolist()
-        pos = {j: float(s[j]) for j in cand}
+        cand = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0))
+        pos = dict(zip(cand.tolist(), s[cand].tolist()))
         if len(pos) <= 1 or best not in pos:
             if touched is not None:
                 touched.add(best)
@@ -342,6 +419,7 @@ class MapBeliefs:
 
     def migrate(self, keep_obj: dict, absorb_obj: dict) -> None:
         """``absorb_obj`` (a map object or a fresh detection) is being merged into ``keep_obj``."""
+        self.flush()
         keep = self.ensure_node(keep_obj)
         raw = self.identity.lookup(absorb_obj)
         if raw is None:
@@ -381,6 +459,7 @@ class MapBeliefs:
             attrs["bbox"] = bbox
 
     def mark_filtered(self, obj: Mapping[str, Any]) -> None:
+        self.flush()
         node = self.node_of(obj)
         if node is None or node not in self.graph:
             return
@@ -394,19 +473,6 @@ class MapBeliefs:
         self.identity.retire(node)
 
     # ------------------------------------------------------------------ labels out
-    def beliefs(self, obj: Mapping[str, Any]) -> dict[str, Any]:
-        """{predicate: BetaBelief} of a map object (empty for an object the backend never saw)."""
-        node = self.node_of(obj)
-        if node is None or node not in self.graph:
-            return {}
-        return dict(self.graph.beliefs(node))
-
-    def probability(self, obj: Mapping[str, Any], predicate: str) -> float:
-        node = self.node_of(obj)
-        if node is None or node not in self.graph:
-            return 0.5
-        return float(self.operator.probability(self.graph, node, predicate))
-
     def _predicate(self, class_name: str) -> str | None:
         """``vocabulary.predicate`` memoised per class name (called for every claim and label read)."""
         try:
@@ -433,167 +499,16 @@ class MapBeliefs:
                 preds.update(self.graph.beliefs(node))
         return preds
 
-    def committed_predicate(self, node: Any) -> str | None:
-        """The predicate with the highest committed probability (> tau), or None.
-
-        The candidates are the predicates the node's detections claimed. Only when none of them
-        commits are the predicates that the geometric labels alone asserted considered (comod,
-        ``geometric_evidence: label``): a sofa the detector always calls ``tv`` is labelled
-        ``sofa``, while one stray label of a segmenter does not outrank a class the detector
-        keeps naming and the geometry keeps confirming. Under independent Beta(1, 1) beliefs, a
-        single observation (mean 2/3) would otherwise outrank a well-supported class with a few
-        contradictions. The probability is the operator's (``FusionOperator.probability``), for
-        every operator."""
-        best = self._best_committed(sorted(self._predicates_of(node)), node)
-        if best is None:
-            extra = self._label_preds_per_node.get(node)
-            if extra:
-                best = self._best_committed(sorted(extra), node)
-        return best
-
-    def _best_committed(self, preds: Iterable[str], node: Any) -> str | None:
-        best, best_p = None, self.tau
-        probability = self.operator.probability
-        graph = self.graph
-        for pred in preds:
-            p = float(probability(graph, node, pred))
-            if p > best_p:
-                best, best_p = pred, p
-        return best
-
-    def _class_for(self, node: Any, pred: str | None) -> tuple[int | None, str] | None:
-        if pred is None:
-            return None
-        counts = self._names_per_node.get(node)
-        if not counts:
-            return None
-        predicate = self._predicate
-        rule = self.label_rule
-        if rule == "first":
-            for key in counts:  # Counter keeps first-seen order
-                if predicate(key[1]) == pred:
-                    return key
-            return self._class_named_by(pred)
-        if not isinstance(rule, str) and pred in rule:
-            name = rule[pred]
-            for key in counts:
-                if key[1] == name:
-                    return key
-            cid = next((i for i, n in self.class_names.items() if n == name), None)
-            return (cid, name)
-        if self._covers_several(pred):  # a merged predicate: the channel's own name, when it has one
-            own = self._channel_class(node, pred, counts)
-            if own is not None:
-                return own
-        best, best_n = None, 0
-        for key, n in counts.items():  # most frequent; ties keep first-seen order
-            if n > best_n and predicate(key[1]) == pred:
-                best, best_n = key, n
-        return best if best is not None else self._class_named_by(pred)
-
-    def _covers_several(self, pred: str) -> bool:
-        """Whether ``pred`` stands for several class names (a merged group: table, desk, ...)."""
-        table = self.table
-        spec = table.specs.get(pred) if table is not None else None
-        return spec is not None and len(spec.aliases) > 1
-
-    def _channel_class(self, node: Any, pred: str, counts: Counter[tuple[int | None, str]]) -> tuple[int | None, str] | None:
-        """(class id, name) of the label the channel gave most often at ``node`` among those naming
-        ``pred``'s classes (the detector's spelling and id when a claim used that name), or None."""
-        seen = self._labels_per_node.get(node)
-        vocab = self.vocabulary
-        if not seen or vocab is None:
-            return None
-        for label, _n in seen.most_common():
-            if vocab.predicate(label) != pred:
-                continue
-            key = normalise_class_name(label)
-            for cid, name in counts:
-                if normalise_class_name(name) == key:
-                    return (cid, name)
-            cid = next((i for i, n in sorted(self.class_names.items()) if normalise_class_name(n) == key), None)
-            return (cid, self.class_names[cid] if cid is not None else label)
-        return None
-
-    def _class_named_by(self, pred: str) -> tuple[int | None, str] | None:
-        """(class id, name) for a predicate no detection of the node named (the geometric labels
-        committed it): the first class of the class list whose predicate it is."""
-        predicate = self._predicate
-        for cid, name in sorted(self.class_names.items()):
-            if predicate(name) == pred:
-                return (cid, name)
-        return None
-
-    def committed_class(self, node: Any) -> tuple[int | None, str] | None:
-        """(class id, class name) of the node's committed predicate under ``label_rule``, or None
-        when nothing commits."""
-        return self._class_for(node, self.committed_predicate(node))
-
-    def label_of(self, obj: Mapping[str, Any]) -> str | None:
-        """Class name from the beliefs (``unknown_label`` when nothing commits; None if unseen)."""
-        node = self.node_of(obj)
-        if node is None or node not in self.graph:
-            return None
-        hit = self.committed_class(node)
-        return self.unknown_label if hit is None else hit[1]
-
-    def class_id_of(self, obj: Mapping[str, Any]) -> int | None:
-        """Class id from the beliefs (``unknown_class_id`` when nothing commits; None if unseen)."""
-        node = self.node_of(obj)
-        if node is None or node not in self.graph:
-            return None
-        hit = self.committed_class(node)
-        if hit is None or hit[0] is None:
-            return self.unknown_class_id
-        return hit[0]
-
     # ------------------------------------------------------------------ per frame
     def end_frame(self) -> None:
         """Called by the patched per-frame merge functions once per frame (after the merge).
 
-        Nothing to do for the bookkeeping itself; :class:`~sgbelief.adapters.conceptgraphs.backend.
+        Applies the frame's queued events; :class:`~sgbelief.adapters.conceptgraphs.backend.
         ConceptGraphsBackend` adds its garbage-collector checkpoints here."""
-
-    def summary(self, objects: Sequence[Mapping[str, Any]] | None = None) -> BackendSummary:
-        """What the backend did, over ``objects`` (a map object list) or every live node it tracks:
-        objects labelled and left ``unknown``, and per detector class the claims (verified, refused,
-        unverifiable by the channel) and the objects whose vote is that class (committed, unknown,
-        written label differing from the vote). See :class:`~.summary.BackendSummary`."""
-        if objects is not None:
-            nodes = [n for n in (self.node_of(o) for o in objects) if n is not None and n in self.graph]
-        else:
-            nodes = [n for n in self.graph.nodes() if n in self._names_per_node]
-        attrs = self.graph.nx.nodes
-        filtered = sum(1 for n in nodes if attrs[n].get("cg_filtered"))
-        live = [n for n in nodes if not attrs[n].get("cg_filtered")]
-        per_class: dict[str, dict[str, int]] = {
-            name: {"claims": c.claims, "verified": c.verified, "refused": c.refused, "unverifiable": c.unverifiable}
-            for name, c in self._claim_counts.items()}
-        differing: list[dict[str, Any]] = []
-        labelled = 0
-        for n in live:
-            hit = self.committed_class(n)
-            labelled += hit is not None
-            names = self._names_per_node.get(n)
-            vote = _vote(names) if names else None
-            if vote is None:
-                continue
-            row = per_class.setdefault(vote, {})
-            key = "committed" if hit is not None else "unknown"
-            row[key] = row.get(key, 0) + 1
-            written = self.unknown_label if hit is None else hit[1]
-            if written != vote:
-                row["differ"] = row.get("differ", 0) + 1
-                differing.append({"node": str(n), "vote": vote, "label": written})
-        vocab = self.vocabulary
-        return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
-                              filtered=filtered, detections=self._routed_detections,
-                              events=self.evidence_count(),
-                              classes={k: ClassSummary(**v) for k, v in sorted(per_class.items())},
-                              differing=differing, channel=self.labels.report() if self._has_channel else {},
-                              vocabulary=getattr(vocab, "name", "") if vocab is not None else "")
+        self.flush()
 
     def evidence_count(self) -> int:
+        self.flush()
         return int(self.graph.evidence_count())
 
     @property
@@ -602,10 +517,9 @@ class MapBeliefs:
         return self._routed_detections
 
 
-def _vote(names: Counter[tuple[int | None, str]]) -> str:
-    """ConceptGraphs' majority class name of an object's claims (ties to the first seen)."""
-    best, best_n = "", 0
-    for (_cid, name), n in names.items():
-        if n > best_n:
-            best, best_n = name, n
-    return best
+def _checked_confidence(value: Any) -> float:
+    """A ``confidence_map`` result as an event confidence: a finite number in [0, 1]."""
+    c = float(value)
+    if not 0.0 <= c <= 1.0:  # also rejects NaN
+        raise InvalidEventError("confidence", f"confidence_map gave {value!r}: must be finite and in [0, 1]")
+    return c
