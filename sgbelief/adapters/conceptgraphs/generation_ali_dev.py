@@ -132,6 +132,7 @@ class AliDevGeneration(GenerationFunctions):
                 backend.flush()
             objects[j] = self.geo_merge(objects[j], det, downsample_voxel_size, dbscan_remove_noise, dbscan_eps,
                                         dbscan_min_points, spatial_sim_type, device, False)
+            self.merged.add(id(objects[j]))
         if tracker is not None:  # ConceptGraphs' MappingTracker counters, updated as the original does
             counter_update(lambda: tracker.increment_total_merges(len(match_indices) - match_indices.count(None)))
             counter_update(lambda: tracker.increment_total_objects(len(objects) - count_before))

@@ -131,6 +131,8 @@ class GenerationFunctions:
         #: map-list length after the last label sync; objects appended beyond it by the script itself
         #: (the first frame's ``extend``) are registered at the next per-frame merge
         self.synced_len = 0
+        #: ids of the map objects a detection was merged into since the last sync
+        self.merged: set[int] = set()
 
     def original(self, name: str) -> Any:
         """ConceptGraphs' own function ``name``, or None when none was captured."""
@@ -154,11 +156,17 @@ class GenerationFunctions:
         self.synced_len = len(objects)
         backend = self.backend
         seen: list[tuple[int, Any]] = []
+        # an object whose node was added this frame has its geometry already, unless a detection
+        # was merged into it since: its summary is computed once, not twice
+        fresh, merged = backend.fresh_geometry, self.merged
         for k in positions:
             obj = objects[k]
             node = backend.ensure_node(obj)
-            backend.refresh_geometry(obj)
+            if id(obj) not in fresh or id(obj) in merged:
+                backend.refresh_geometry(obj)
             seen.append((k, node))
+        fresh.clear()
+        merged.clear()
         backend.flush()
         self.write_labels(objects, seen, backend.take_changed_nodes())
 
@@ -171,6 +179,8 @@ class GenerationFunctions:
         """The touched-position set for a per-frame merge, seeded with objects the script appended itself."""
         touched = self.touched
         touched.clear()
+        self.merged.clear()
+        self.backend.fresh_geometry.clear()  # only objects registered during this merge count as fresh
         start = self.synced_len if self.synced_len <= len(objects) else 0
         touched.update(range(start, len(objects)))
         return touched
@@ -211,6 +221,7 @@ class GenerationFunctions:
             if backend.pending_dict(objects[j]):  # a queued claim still reads this dict: apply first
                 backend.flush()
             objects[j] = merge_one(objects[j], det)
+            self.merged.add(id(objects[j]))
         self.sync_labels(objects, touched)
         backend.end_frame()
         return objects
@@ -233,6 +244,7 @@ class GenerationFunctions:
                 # tombstones make sure its evidence still migrates only once
                 backend.migrate(objects[j], objects[i])
                 objects[j] = merge_one(objects[j], objects[i])
+                self.merged.add(id(objects[j]))
                 kept[i] = False
         index_updates: list[int | None] = []
         cur = 0

@@ -157,6 +157,9 @@ class MapBeliefs(LabelReader):
         self._pending: list[tuple[Any, Any, str]] = []
         self._pending_dicts: set[int] = set()
         self._batch_open = False
+        #: ids of the dicts whose geometry was read when their node was added, since the last
+        #: per-frame sync (their geometry is current unless merged into since: see sync_labels)
+        self.fresh_geometry: set[int] = set()
 
     @property
     def _batched(self) -> bool:
@@ -226,6 +229,7 @@ class MapBeliefs(LabelReader):
             return
         centroid, bbox = geometry_summary(obj)
         self.graph.add_node(node, centroid=centroid, bbox=bbox, source="conceptgraphs")
+        self.fresh_geometry.add(id(obj))
 
     # ------------------------------------------------------------------ evidence
     def route_detection(self, det: dict, targets: Mapping[Any, float]) -> int:
