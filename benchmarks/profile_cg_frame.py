@@ -12,14 +12,18 @@ own work: routing, identity, geometry summaries, the channel, the operator, the 
 The same frames also go through the operator alone (the events the backend made, replayed with
 ``update_many`` into a fresh graph): the per-event cost of the method itself.
 
-Prints CPU time per frame and per detection (``time.process_time``, medians over frames), and with
-``--profile`` a pyinstrument tree of the timed frames (``--profile-out`` writes it to a file).
+Prints CPU time per frame and per detection (``time.process_time``, medians over frames); with
+``--breakdown`` the CPU time of the timed frames by part of the backend (exclusive times of the
+wrapped functions, so nothing is counted twice; CPU time, so other jobs on the machine do not
+inflate it); with ``--profile`` a pyinstrument tree (wall-clock samples; ``--profile-out`` writes it
+to a file).
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -102,7 +106,74 @@ class Scenario:
         return dets, agg
 
 
-def run(n_obj: int, n_dets: int, frames: int, channel: str, profiler: Any = None) -> dict:
+#: the parts of the backend timed by ``--breakdown``: (label, class path, method)
+PARTS = [
+    ("operator: update_many (without the channel)", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "_apply"),
+    ("channel: label-image look-up", "sgbelief.fusion.channel:LabelImageChannel", "label_detection"),
+    ("per-claim notes after the update (counts, label predicates)", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "flush"),
+    ("routing: claims -> queued events", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "route_detection"),
+    ("identity: look-up, registration, new graph nodes", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "ensure_node"),
+    ("targeting: candidates of a score row", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "targets_for"),
+    ("geometry summaries (centroid, box)", "sgbelief.adapters.conceptgraphs.geometry", "geometry_summary"),
+    ("geometric merge (stand-in, not the backend's)", "__main__", "stand_in_merge"),
+]
+
+
+class Breakdown:
+    """Exclusive CPU time per wrapped function (a call's time minus that of wrapped calls inside it)."""
+
+    def __init__(self) -> None:
+        self.totals: dict[str, float] = {}
+        self._stack: list[list[float]] = []
+        self._undo: list[tuple[Any, str, Any]] = []
+        self.on = False
+
+    def wrap(self, owner: Any, name: str, label: str) -> None:
+        import functools
+
+        fn = getattr(owner, name)
+        clock = time.process_time
+        totals, stack = self.totals, self._stack
+
+        @functools.wraps(fn)
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            if not self.on:
+                return fn(*args, **kwargs)
+            stack.append([0.0])
+            t0 = clock()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                dt = clock() - t0
+                inner = stack.pop()[0]
+                totals[label] = totals.get(label, 0.0) + dt - inner
+                if stack:
+                    stack[-1][0] += dt
+
+        self._undo.append((owner, name, fn))
+        setattr(owner, name, timed)
+
+    def restore(self) -> None:
+        for owner, name, fn in reversed(self._undo):
+            setattr(owner, name, fn)
+        self._undo.clear()
+
+
+def _install_breakdown(bd: Breakdown) -> None:
+    import importlib
+
+    for label, where, name in PARTS:
+        modname, _, cls = where.partition(":")
+        mod = sys.modules.get(modname) or importlib.import_module(modname)
+        owner = getattr(mod, cls) if cls else mod
+        bd.wrap(owner, name, label)
+        if not cls and modname.endswith("geometry"):  # the module-level name map_beliefs bound
+            mb = importlib.import_module("sgbelief.adapters.conceptgraphs.map_beliefs")
+            bd.wrap(mb, name, label)
+
+
+def run(n_obj: int, n_dets: int, frames: int, channel: str, profiler: Any = None,
+        breakdown: Breakdown | None = None) -> dict:
     from sgbelief.adapters.conceptgraphs import ConceptGraphsBackend, LabelImageChannel
     from sgbelief.adapters.conceptgraphs.functions import make_functions
     from sgbelief.adapters.conceptgraphs.standins import DetectionList
@@ -122,14 +193,19 @@ def run(n_obj: int, n_dets: int, frames: int, channel: str, profiler: Any = None
     backend.event_log.clear()
     per_frame: list[float] = []
     n_routed = 0
+    total = 0.0
     for t in range(2, frames + 2):
         dets, agg = sc.frame(t, len(objects))
         if profiler is not None:
             profiler.start()
+        if breakdown is not None:
+            breakdown.on = True
         t0 = time.process_time()
         objects = f.merge_detections_to_objects(cfg, DetectionList(dets), objects, agg)
-        f.get_most_common_class(objects[:0])  # nothing: main reads labels on demand
         per_frame.append(time.process_time() - t0)
+        total += per_frame[-1]
+        if breakdown is not None:
+            breakdown.on = False
         if profiler is not None:
             profiler.stop()
         n_routed += n_dets
@@ -147,6 +223,9 @@ def run(n_obj: int, n_dets: int, frames: int, channel: str, profiler: Any = None
     op.update_many(g, items)
     replay = (time.process_time() - t0) / max(len(items), 1)
     med = statistics.median(per_frame)
+    if breakdown is not None:
+        breakdown.totals["frame loop, label sync, the rest"] = total - sum(breakdown.totals.values())
+        breakdown.totals["(all)"] = total
     return {"objects": n_obj, "map_objects_end": len(objects), "detections": n_dets, "frames": frames,
             "channel": channel, "frame_ms_median": 1000 * med, "per_detection_us": 1e6 * med / n_dets,
             "events": len(items), "replay_per_event_us": 1e6 * replay,
@@ -160,6 +239,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--channel", default="oracle", choices=["oracle", "none"])
     ap.add_argument("--profile", action="store_true", help="pyinstrument tree of the timed frames")
+    ap.add_argument("--breakdown", action="store_true", help="CPU time of the timed frames by part of the backend")
     ap.add_argument("--profile-out", default=None)
     args = ap.parse_args(argv)
     for n_obj in (int(x) for x in args.objects.split(",")):
@@ -169,11 +249,24 @@ def main(argv: list[str] | None = None) -> int:
                 from pyinstrument import Profiler
 
                 prof = Profiler(interval=0.0002)
-            r = run(n_obj, n_dets, args.frames, args.channel, prof)
+            bd = None
+            if args.breakdown:
+                bd = Breakdown()
+                _install_breakdown(bd)
+            try:
+                r = run(n_obj, n_dets, args.frames, args.channel, prof, bd)
+            finally:
+                if bd is not None:
+                    bd.restore()
             print(f"objects {r['objects']:4d} (end {r['map_objects_end']:4d})  detections/frame {n_dets:3d}  "
                   f"frame {r['frame_ms_median']:6.2f} ms  per detection {r['per_detection_us']:6.1f} us  "
                   f"replay per event {r['replay_per_event_us']:5.1f} us ({r['events']} events)  "
                   f"ratio {r['ratio']:.1f}x")
+            if bd is not None:
+                allt = bd.totals.pop("(all)")
+                n = args.frames * n_dets
+                for label, sec in sorted(bd.totals.items(), key=lambda kv: -kv[1]):
+                    print(f"    {label:<62} {1e6 * sec / n:7.1f} us per detection  {100 * sec / allt:5.1f} %")
             if prof is not None:
                 text = prof.output_text(unicode=False, color=False, show_all=False)
                 if args.profile_out:

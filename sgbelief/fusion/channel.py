@@ -103,6 +103,9 @@ class FrameLabels:
         return self.labels.get(node)
 
 
+_UNSEEN = object()
+
+
 class LabelImageChannel:
     """Geometric channel from per-frame label images (semantic segmentation, or instances + a table).
 
@@ -145,6 +148,8 @@ class LabelImageChannel:
             raise ValueError("min_pixels must be >= 1")
         self._source = images if callable(images) else None
         self._frames: dict[int, tuple[Any, Mapping[int, Any] | None]] = {}
+        #: per frame: (its image, smallest id, id range, id -> name) (see _frame_stats)
+        self._stats: dict[int, tuple[Any, int, int, dict[int, str | None], Any]] = {}
         if images is not None and not callable(images):
             for t, img in images.items():
                 self.set_frame(t, img)
@@ -235,8 +240,8 @@ class LabelImageChannel:
             values = image[m]
         if values.size < self.min_pixels:
             return None
-        lo, hi = int(values.min()), int(values.max())
-        if hi - lo < 65536:  # small id range (class or instance ids): a histogram, not a sort
+        lo, span, names = self._frame_stats(t, image, table)
+        if span < 65536:  # a small id range (class or instance ids): a histogram, not a sort
             hist = np.bincount((values - lo if lo else values).astype(np.intp, copy=False), minlength=1)
             ids = np.flatnonzero(hist)
             counts = hist[ids]
@@ -245,8 +250,11 @@ class LabelImageChannel:
             ids, counts = np.unique(values, return_counts=True)
         totals: dict[str, int] = {}
         labelled = 0
+        name_of = self._name
         for v, c in zip(ids.tolist(), counts.tolist()):
-            name = self._name(v, table)
+            name = names.get(v, _UNSEEN)
+            if name is _UNSEEN:
+                name = names[v] = name_of(v, table)
             if name is None:
                 continue
             totals[name] = totals.get(name, 0) + c
@@ -255,6 +263,19 @@ class LabelImageChannel:
             return None
         best = max(sorted(totals), key=lambda n: totals[n])  # ties: alphabetical
         return best if totals[best] >= self.min_purity * labelled else None
+
+    def _frame_stats(self, t: int, image: Any, table: Any) -> tuple[int, int, dict[int, str | None]]:
+        """(smallest id, id range, id -> name so far) of frame ``t``'s image and instance table,
+        computed once per frame."""
+        key = int(t)
+        held = self._stats.get(key)
+        if held is None or held[0] is not image or held[4] is not table:
+            if len(self._stats) > len(self._frames) + 8:  # drop the stats of frames no longer held
+                for old in [k for k in self._stats if k not in self._frames]:
+                    del self._stats[old]
+            lo, hi = (int(image.min()), int(image.max())) if image.size else (0, 0)
+            held = self._stats[key] = (image, lo, hi - lo, {}, table)
+        return held[1], held[2], held[3]
 
     def label_detection(self, detection: Mapping[str, Any], index: int, t: int) -> str | None:
         """Label of entry ``index`` of a ConceptGraphs detection / object dict (its mask and frame)."""

@@ -78,6 +78,16 @@ def as_numpy(scores: Any) -> np.ndarray:
     return np.asarray(scores, dtype=float)
 
 
+def candidate_matrix(scores: np.ndarray, threshold: float) -> list[list[int]]:
+    """Per row, the positions whose score is finite, above ``threshold`` and positive (the targeting
+    candidates of :meth:`MapBeliefs.targets_for`), for a whole frame in a few array operations."""
+    rows, cols = np.nonzero(np.isfinite(scores) & (scores > threshold) & (scores > 0))
+    out: list[list[int]] = [[] for _ in range(scores.shape[0])]
+    for r, c in zip(rows.tolist(), cols.tolist()):
+        out[r].append(c)
+    return out
+
+
 def vote_dtype_scalar(class_ids: Any, cid: int) -> Any:
     """``cid`` as the numpy scalar type ``np.unique(np.asarray(class_ids))`` would give (int64 if not integral)."""
     dtype = getattr(class_ids, "dtype", None)
@@ -205,8 +215,10 @@ class GenerationFunctions:
         n_rows = scores.shape[0]
         if scores.shape[1]:
             best_of, max_of = scores.argmax(axis=1).tolist(), scores.max(axis=1).tolist()
+            n = min(scores.shape[1], len(objects))  # candidates of every row at once (see targets_for)
+            cands = candidate_matrix(scores[:, :n], threshold)
         else:
-            best_of, max_of = [0] * n_rows, [NEG_INF] * n_rows
+            best_of, max_of, cands = [0] * n_rows, [NEG_INF] * n_rows, None
         for i in range(n_rows):
             det = detection_list[i]
             top = max_of[i]
@@ -216,7 +228,8 @@ class GenerationFunctions:
                 touched.add(len(objects) - 1)
                 continue
             j = best_of[i]
-            targets = backend.targets_for(scores[i], j, objects, threshold, touched)
+            targets = backend.targets_for(scores[i], j, objects, threshold, touched,
+                                          candidates=None if cands is None else cands[i])
             backend.route_detection(det, targets)
             if backend.pending_dict(objects[j]):  # a queued claim still reads this dict: apply first
                 backend.flush()

@@ -307,6 +307,22 @@ class MapBeliefs(LabelReader):
             return
         self._pending = []
         self._pending_dicts.clear()
+        self._apply(pending)
+        null, log, has_channel = self._null, self.event_log, self._has_channel
+        for event, channel, name in pending:
+            answers = None if channel is null else channel.answers
+            self._count_claim(name, event.predicate, event.confidence, answers)
+            if answers:
+                # comod observes what the geometric label asserts (geometric_evidence: label): a
+                # label is a candidate class of its node even when no detection named it
+                self._note_label_predicates(answers)
+            if log is not None:
+                log.append((event, dict(answers) if answers else {}))
+            if has_channel and channel is not null and channel.asked:
+                self.labels.note_frame(event.t)
+
+    def _apply(self, pending: list[tuple[Any, Any, str]]) -> None:
+        """The operator's update of the queued (event, channel) pairs, in order."""
         op, graph = self.operator, self.graph
         if self._batched:
             resolutions = op.update_many(graph, [(event, channel) for event, channel, _ in pending])
@@ -325,18 +341,6 @@ class MapBeliefs(LabelReader):
                     self._note_resolutions(report.resolutions)
                 if self.keep_reports:
                     self.reports.append(report)
-        null, log, has_channel = self._null, self.event_log, self._has_channel
-        for event, channel, name in pending:
-            answers = None if channel is null else channel.answers
-            self._count_claim(name, event.predicate, event.confidence, answers)
-            if answers:
-                # comod observes what the geometric label asserts (geometric_evidence: label): a
-                # label is a candidate class of its node even when no detection named it
-                self._note_label_predicates(answers)
-            if log is not None:
-                log.append((event, dict(answers) if answers else {}))
-            if has_channel and channel is not null and channel.asked:
-                self.labels.note_frame(event.t)
 
     def pending_dict(self, obj: Any) -> bool:
         """Whether a queued event still reads ``obj`` (a detection / object dict): the caller
@@ -392,22 +396,24 @@ class MapBeliefs(LabelReader):
         return changed
 
     def targets_for(self, row: Any, best: int, objects: Sequence[dict], threshold: float,
-                    touched: set[int] | None = None) -> dict[Any, float]:
+                    touched: set[int] | None = None, candidates: Sequence[int] | None = None) -> dict[Any, float]:
         """Targeting distribution T for one detection from its row of association scores.
 
         Every object whose score is above ``threshold`` (finite scores when it is -inf) is a
         candidate; T(v) is proportional to max(score, 0) over the candidates, and the argmax
         alone gets mass 1 when no candidate has a positive score.  The caller drops T(v) <= tau_T.
-        ``touched``: the list positions of the targeted objects are added to it.
+        ``touched``: the list positions of the targeted objects are added to it. ``candidates``:
+        the positions of the positive candidates when the caller found them for the whole frame.
         """
         scores = row if type(row) is np.ndarray and row.dtype == np.float64 else \
             np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float)
         scores = scores.ravel()
-        n = min(len(scores), len(objects))
-        s = scores[:n]
-        # candidates found in numpy: the per-detection cost does not grow with the map's size
-        cand = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0))
-        pos = dict(zip(cand.tolist(), s[cand].tolist()))
+        if candidates is None:
+            n = min(len(scores), len(objects))
+            s = scores[:n]
+            # candidates found in numpy: the per-detection cost does not grow with the map's size
+            candidates = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0)).tolist()
+        pos = {j: float(scores[j]) for j in candidates}
         if len(pos) <= 1 or best not in pos:
             if touched is not None:
                 touched.add(best)
