@@ -43,6 +43,7 @@ class AliDevGeneration(GenerationFunctions):
         then relabel the other objects whose beliefs changed (a merge, a queue resolution)."""
         backend = self.backend
         labelled = self.labelled
+        graph = backend.graph
         for k, node in seen:
             obj = objects[k]
             if not isinstance(obj, BeliefLabelledObject):
@@ -50,7 +51,7 @@ class AliDevGeneration(GenerationFunctions):
                 backend.identity.rebind(obj, node)
                 objects[k] = obj
             labelled[node] = obj
-            obj.set_belief_label(backend.label_of(obj))
+            obj.set_belief_label(backend.node_label(node) if node in graph else None)
             changed.discard(node)
         for node in changed:
             obj = labelled.get(node)

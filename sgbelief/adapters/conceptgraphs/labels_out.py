@@ -168,6 +168,11 @@ class LabelReader:
         when nothing commits."""
         return self._class_for(node, self.committed_predicate(node))
 
+    def node_label(self, node: Any) -> str:
+        """The class name the beliefs give graph node ``node`` (``unknown_label`` when nothing commits)."""
+        hit = self.committed_class(node)
+        return self.unknown_label if hit is None else hit[1]
+
     def label_of(self, obj: Mapping[str, Any]) -> str | None:
         """Class name from the beliefs (``unknown_label`` when nothing commits; None if unseen)."""
         node = self.node_of(obj)
