@@ -42,20 +42,23 @@ def main(argv: list[str] | None = None) -> int:
                          "also reports the backend's cost per detection beside the operator's cost per event "
                          "when the run's events are replayed (update_many into a fresh graph)")
     ap.add_argument("--clutter", type=int, default=0,
-                    help="scatter this many small objects in the room: more detections per frame (about 10 "
-                         "with 25, 30 with 150); label accuracy is only comparable at 0")
+                    help="scatter this many small objects in the room: more detections per frame (a median of "
+                         "10 with 25 at 128x96 or 192x144, 19 with 150 at 128x96, 29 with 200 at 192x144); label "
+                         "accuracy is only comparable at 0")
+    ap.add_argument("--size", default="128x96", help="rendered image size WxH (default %(default)s)")
     ap.add_argument("--json", default=None, help="write the results here")
     args = ap.parse_args(argv)
     if not args.cg:
         ap.error(f"pass --cg or set {H.ENV}")
     if args.cpu_time:
         H.CLOCK[0] = time.process_time
-    world = H.render_world(n_frames=args.frames, clutter=args.clutter)
+    width, height = (int(x) for x in args.size.lower().split("x"))
+    world = H.render_world(n_frames=args.frames, clutter=args.clutter, width=width, height=height)
     cg = H.import_conceptgraph(args.cg)
     gen = cg[3]
     out = {"branch": gen, "path": args.cg, "operator": args.operator, "operator_config": args.operator_config,
            "frames": args.frames, "clock": "process_time" if args.cpu_time else "perf_counter",
-           "clutter": args.clutter, "runs": []}
+           "clutter": args.clutter, "size": args.size, "runs": []}
     t0 = time.perf_counter()
     pre = max(0, args.objects - len(world.objects)) if args.objects else 0
     out["objects_target"], out["prepopulated"] = args.objects, pre
