@@ -38,20 +38,29 @@ def main(argv: list[str] | None = None) -> int:
                          "frame's detections (see cg_harness.run); prints per-frame medians")
     ap.add_argument("--cpu-time", action="store_true",
                     help="time the fusion step with this process's CPU time (time.process_time) instead of "
-                         "wall time: steadier when other jobs share the machine (pair with OMP_NUM_THREADS=1)")
+                         "wall time: steadier when other jobs share the machine (pair with OMP_NUM_THREADS=1); "
+                         "also reports the backend's cost per detection beside the operator's cost per event "
+                         "when the run's events are replayed (update_many into a fresh graph)")
+    ap.add_argument("--clutter", type=int, default=0,
+                    help="scatter this many small objects in the room: more detections per frame (a median of "
+                         "10 with 25 at 128x96 or 192x144, 19 with 150 at 128x96, 29 with 200 at 192x144); label "
+                         "accuracy is only comparable at 0")
+    ap.add_argument("--size", default="128x96", help="rendered image size WxH (default %(default)s)")
     ap.add_argument("--json", default=None, help="write the results here")
     args = ap.parse_args(argv)
     if not args.cg:
         ap.error(f"pass --cg or set {H.ENV}")
     if args.cpu_time:
         H.CLOCK[0] = time.process_time
-    world = H.render_world(n_frames=args.frames)
+    width, height = (int(x) for x in args.size.lower().split("x"))
+    world = H.render_world(n_frames=args.frames, clutter=args.clutter, width=width, height=height)
     cg = H.import_conceptgraph(args.cg)
     gen = cg[3]
     out = {"branch": gen, "path": args.cg, "operator": args.operator, "operator_config": args.operator_config,
-           "frames": args.frames, "clock": "process_time" if args.cpu_time else "perf_counter", "runs": []}
+           "frames": args.frames, "clock": "process_time" if args.cpu_time else "perf_counter",
+           "clutter": args.clutter, "size": args.size, "runs": []}
     t0 = time.perf_counter()
-    pre = max(0, args.objects - len(H.WORLD)) if args.objects else 0
+    pre = max(0, args.objects - len(world.objects)) if args.objects else 0
     out["objects_target"], out["prepopulated"] = args.objects, pre
     vote = H.run(world, cg, args.cg, seed=args.seed, prepopulate=pre)
     if args.objects:
@@ -65,6 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     for ch in [c for c in args.channels.split(",") if c]:
         t0 = time.perf_counter()
         backend = H.make_backend(args.operator, H.make_channel(world, ch), operator_config=args.operator_config)
+        if args.cpu_time:
+            backend.event_log = []  # the run's events, replayed below
         r = H.run(world, cg, args.cg, backend=backend, seed=args.seed, prepopulate=pre)
         s = r.summary
         if args.objects:
@@ -76,14 +87,67 @@ def main(argv: list[str] | None = None) -> int:
                   f"merge with - without, median over frames {dm:+.1f} ms = {100 * dm / med_v:+.1f} % of the step")
         print(f"[{gen}] {args.operator:<8} channel={ch:<9} acc {r.accuracy:.3f}  mIoU {r.miou:.3f}  "
               f"objects {r.n_objects}  unknown {s.unknown}  fusion {np.mean(r.fusion_ms):.1f} ms/frame  "
-              f"({time.perf_counter() - t0:.0f} s)")
+              f"vocabulary from {backend.vocabulary_source}  ({time.perf_counter() - t0:.0f} s)")
         out["runs"].append({"channel": ch, "operator": args.operator, "accuracy": r.accuracy, "miou": r.miou,
-                            "objects": r.n_objects, "unknown": s.unknown, "fusion_ms": float(np.mean(r.fusion_ms))})
+                            "objects": r.n_objects, "unknown": s.unknown, "fusion_ms": float(np.mean(r.fusion_ms)),
+                            "vocabulary_source": backend.vocabulary_source,
+                            "channel_labels": s.channel, "differing": len(s.differing)})
         if args.objects:
             out["runs"][-1].update(_per_frame(r))
+        if args.cpu_time:
+            cost = _cost_per_detection(backend, vote, r)
+            out["runs"][-1].update(cost)
+            print(f"[{gen}] {args.operator}/{ch}: backend {cost['backend_us_per_detection']:.1f} us per detection "
+                  f"(median over {cost['frames']} frames of (merge with - without) / detections; "
+                  f"{cost['detections']} detections); "
+                  f"replay {cost['replay_us_per_event']:.1f} us per event ({cost['events']} events); "
+                  f"ratio {cost['ratio']:.2f} (of which the channel's own mask look-up "
+                  f"{cost['channel_us_per_detection']:.1f} us; without it {cost['ratio_without_channel']:.2f}); "
+                  f"added to the fusion step {cost['added_pct']:+.1f} % (median merge delta / median CG step; "
+                  f"median {cost['n_dets_median']:.0f} detections, {cost['n_map_median']:.0f} map objects)")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
     return 0
+
+
+def _cost_per_detection(backend: object, vote: H.RunResult, r: H.RunResult) -> dict:
+    """The backend's cost per detection (CPU time of the merge with the backend minus without, per
+    frame over that frame's detections, median over frames) beside the operator's own cost per
+    event: the events the backend routed in this run, replayed in one ``update_many`` call into a
+    fresh graph (after one warm-up replay)."""
+    from sgbelief.api.operators import make_operator
+    from sgbelief.fusion.channel import FrameLabels
+    from sgbelief.graph.scene_graph import SceneGraph
+
+    paired = len(r.merge_ms) == len(vote.merge_ms) and r.n_dets == vote.n_dets
+    if paired:  # per frame: (merge with the backend - without) / detections; the median over frames
+        # leaves out one-off frames (the first timed frame registers a pre-populated map at once)
+        per_det = np.subtract(r.merge_ms, vote.merge_ms) / np.maximum(np.asarray(r.n_dets, dtype=float), 1)
+    else:
+        per_det = np.array([(np.median(r.merge_ms) - np.median(vote.merge_ms)) / max(np.median(r.n_dets), 1)])
+    dets = int(np.sum(r.n_dets))
+    items = [(event, FrameLabels(labels)) for event, labels in backend.event_log]  # type: ignore[attr-defined]
+    make_operator(backend.operator_name, backend.operator.config, backend.table).update_many(  # type: ignore[attr-defined]
+        SceneGraph(create_nodes=True), items)  # warm-up: first-call costs out of the timing
+    op = make_operator(backend.operator_name, backend.operator.config, backend.table)  # type: ignore[attr-defined]
+    graph = SceneGraph(create_nodes=True)
+    t0 = time.process_time()
+    op.update_many(graph, items)
+    replay_s = time.process_time() - t0
+    backend_us = 1000 * float(np.median(per_det))
+    replay_us = 1e6 * replay_s / max(len(items), 1)
+    channel = getattr(backend, "channel", None)
+    channel_us = 1e6 * getattr(channel, "seconds", 0.0) / max(dets, 1)  # mean over the run
+    med_delta = float(np.median(np.subtract(r.merge_ms, vote.merge_ms))) if paired else \
+        float(np.median(r.merge_ms) - np.median(vote.merge_ms))
+    return {"backend_us_per_detection": backend_us, "replay_us_per_event": replay_us,
+            "ratio": backend_us / replay_us if replay_us else float("nan"), "detections": dets,
+            "channel_us_per_detection": channel_us,
+            "ratio_without_channel": (backend_us - channel_us) / replay_us if replay_us else float("nan"),
+            "frames": len(r.merge_ms), "events": len(items), "paired_frames": paired,
+            "merge_delta_ms_median": med_delta, "cg_fusion_ms_median": float(np.median(vote.fusion_ms)),
+            "added_pct": 100 * med_delta / float(np.median(vote.fusion_ms)),
+            "n_dets_median": float(np.median(r.n_dets)), "n_map_median": float(np.median(r.n_map))}
 
 
 def _per_frame(r: H.RunResult) -> dict:

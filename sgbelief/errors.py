@@ -89,6 +89,11 @@ class QueueError(SgbeliefError, LookupError):
     """A queue operation on an event that is not pending (e.g. confirming a committed event)."""
 
 
+class ChannelMismatchError(SgbeliefError, ValueError):
+    """A geometric channel's labels match nothing in the vocabulary (or it gave none at all), so it
+    could verify no claim: raised instead of letting the channel be silently off."""
+
+
 # ---------------------------------------------------------------------------------- warnings
 class SgbeliefWarning(UserWarning):
     """Base class of every warning sgbelief issues: a condition the user should hear about that

@@ -81,6 +81,15 @@ def merge_detections_to_objects(cfg, detection_list, objects, agg_sim):
     return objects
 
 
+#: the class list the stand-in run loads (ConceptGraphs reads it from the dataset's classes json)
+CLASSES = ["unlabelled", "chair", "table", "sofa"]
+
+
+def create_or_load_colors(cfg, filename="gsa_classes_tag2text"):
+    """ConceptGraphs main's loader: (class names, class colours)."""
+    return list(CLASSES), {str(k): [0.5, 0.5, 0.5] for k in range(len(CLASSES))}
+
+
 def install() -> dict[str, types.ModuleType]:
     """Register the stand-in modules in ``sys.modules`` and return them."""
     mods = {n: types.ModuleType(n) for n in NAMES}
@@ -88,14 +97,14 @@ def install() -> dict[str, types.ModuleType]:
                         mods["conceptgraph.slam.mapping"], mods["conceptgraph.slam.cfslam_pipeline_batch"])
     sc.DetectionList, sc.MapObjectList = DetectionList, MapObjectList
     for name in ("merge_obj2_into_obj1", "merge_overlap_objects", "merge_objects", "filter_objects",
-                 "compute_overlap_matrix"):
+                 "compute_overlap_matrix", "create_or_load_colors"):
         setattr(ut, name, globals()[name])
     ut.MapObjectList = MapObjectList
     mp.merge_obj2_into_obj1 = merge_obj2_into_obj1
     mp.merge_detections_to_objects = merge_detections_to_objects
     mp.MapObjectList, mp.DetectionList = MapObjectList, DetectionList
     # the pipeline script's `from conceptgraph.slam.utils import ...` bindings
-    for name in ("merge_obj2_into_obj1", "filter_objects", "merge_objects"):
+    for name in ("merge_obj2_into_obj1", "filter_objects", "merge_objects", "create_or_load_colors"):
         setattr(pipe, name, getattr(ut, name))
     pipe.merge_detections_to_objects = mp.merge_detections_to_objects
     pipe.MapObjectList, pipe.DetectionList = MapObjectList, DetectionList

@@ -65,7 +65,10 @@ def test_import_saved_map_replays_every_detection(tmp_path, capsys, ali_dev):
 
     g = SceneGraph.load(out / "graph.json")
     assert g.evidence_count() == 7  # 4 + 3 detections, each once
-    assert g.probability("cg-1", "is_table_or_desk") > 0.5
+    assert g.probability("cg-1", "is_table") > 0.5  # the map's own class list: table is its own class
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["classes"]["table"]["claims"] == 4 and summary["classes"]["chair"]["claims"] == 3
+    assert summary["vocabulary"] and summary["objects"] == 2
     assert "imported 2 objects, 7 detections" in capsys.readouterr().out
 
 

@@ -51,6 +51,24 @@ def _detection(class_id: int, frame: int, seed: int) -> dict:
     return det
 
 
+def test_install_without_conceptgraphs_raises_and_patches_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+
+    from sgbelief.adapters.conceptgraphs import ConceptGraphsBackend
+    from sgbelief.adapters.conceptgraphs.backend import ConceptGraphsNotFoundError
+
+    for name in list(sys.modules):
+        if name == "conceptgraph" or name.startswith("conceptgraph."):
+            monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if not Path(p, "conceptgraph").is_dir()])
+    backend = ConceptGraphsBackend("comod", print_summary=False)
+    with pytest.raises(ConceptGraphsNotFoundError, match="conceptgraph.slam.utils") as info:
+        backend.install()
+    assert isinstance(info.value, ImportError)
+    assert backend.generation is None and not backend.active
+    backend.uninstall()  # nothing to undo
+
+
 def test_readme_has_the_two_conceptgraphs_blocks() -> None:
     blocks = _section_blocks()
     assert len(blocks) == 2
@@ -65,6 +83,9 @@ def test_readme_three_line_change_patches_the_pipeline() -> None:
         backend = ns["backend"]
         assert backend.generation == "main"
         pipe = mods["conceptgraph.slam.cfslam_pipeline_batch"]
+        classes, _colours = pipe.create_or_load_colors(_cfg(), "gsa_classes_test")  # the script's first step
+        assert backend.vocabulary.class_names == tuple(classes) == tuple(fake.CLASSES)
+        assert backend.vocabulary_source == "create_or_load_colors"
         objects = pipe.MapObjectList(device="cpu")  # as the script calls it (kwargs accepted while patched)
         objects.append(_detection(2, 0, 0))
         objects = pipe.merge_detections_to_objects(_cfg(), DetectionList([_detection(2, 1, 1)]), objects,
@@ -76,7 +97,7 @@ def test_readme_three_line_change_patches_the_pipeline() -> None:
         fake.uninstall()
 
 
-def test_readme_label_image_block_connects_the_segmenter() -> None:
+def test_readme_label_image_block_connects_the_segmenter(capsys: pytest.CaptureFixture[str]) -> None:
     mods = fake.install()
     image_rgb = np.zeros((H, W, 3), dtype=np.uint8)
     # what the run script has in its frame loop: the frame index, the image, a segmenter
@@ -86,6 +107,7 @@ def test_readme_label_image_block_connects_the_segmenter() -> None:
         exec(compile(_section_blocks()[1], "README.md", "exec"), ns)
         backend, seg = ns["backend"], ns["seg"]
         pipe = mods["conceptgraph.slam.cfslam_pipeline_batch"]
+        pipe.create_or_load_colors(_cfg(), "gsa_classes_test")  # the run loads its class list
         objects = pipe.MapObjectList(device="cpu")
         objects.append(_detection(1, 0, 0))  # the first frame: the script appends its detections itself
         backend.keep_reports = True
@@ -95,10 +117,18 @@ def test_readme_label_image_block_connects_the_segmenter() -> None:
             det = _detection(2, frame, frame)
             assert seg.label_detection(det, 0, frame) == "chair"
             objects = pipe.merge_detections_to_objects(_cfg(), DetectionList([det]), objects, torch.tensor([[1.5]]))
-        verdicts = [o.verdict.symbol for r in backend.reports if r.predicate == "is_table_or_desk" for o in r.targets]
+        verdicts = [o.verdict.symbol for r in backend.reports if r.predicate == "is_table" for o in r.targets]
         assert verdicts == ["⊥", "⊥"]
         assert backend.operator.stats["refused"] == 2
         assert [int(c) for c in objects.get_most_common_class()] == [1]  # the beliefs: chair
+        s = backend.summary()
+        assert (s.classes["table"].claims, s.classes["table"].refused) == (2, 2)
+        assert s.classes["chair"].claims == 1 and s.channel["matched"] >= 2 and not s.channel["unmatched"]
+        assert [(d["vote"], d["label"]) for d in s.differing] == [("table", "chair")] and s.labelled == 1
+        assert s.classes["table"].differ == 1 and "table" in s.format()
+        backend.uninstall()  # prints the summary (to stderr by default)
+        err = capsys.readouterr().err
+        assert "3 claims routed" in err and "labels that differ from the vote: cg-0: table -> chair" in err
     finally:
         if "backend" in ns:
             ns["backend"].uninstall()

@@ -26,7 +26,7 @@ LABEL = {"geometric_evidence": "label"}
 
 @pytest.fixture(scope="module")
 def table() -> SubsumptionTable:
-    return derive_table(CLASSES, "indoor")
+    return derive_table(CLASSES, "indoor", merge=True)  # table and desk: one predicate
 
 
 def _tv_claims(n: int, label: str | None = "sofa") -> list[tuple[EvidenceEvent, FrameLabels]]:

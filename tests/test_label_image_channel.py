@@ -157,11 +157,18 @@ def test_label_rule_for_predicates_covering_several_names() -> None:
         d = make_detection(0.2 * np.random.default_rng(k).random((60, 3)), 2, name, 0.9, k, seed=k)
         d["geometric_label"] = "table"
         dets.append(d)
-    for rule, want in [("most_frequent", "desk"), ("first", "desk"), ({"is_table_or_desk": "table"}, "table")]:
-        backend = ConceptGraphsBackend("comod", label_rule=rule)
+    # table and desk are separate classes unless merged; merged, the committed predicate covers both
+    # and the default rule writes the channel's own name (table), not the name detected most often
+    for rule, want in [("most_frequent", "table"), ("first", "desk"), ({"is_table_or_desk": "table"}, "table")]:
+        backend = ConceptGraphsBackend("comod", label_rule=rule, class_names=["chair", "desk", "table"],
+                                       merge=["is_table_or_desk"])
         objects = run(backend, copy.deepcopy(dets))
         assert backend.committed_predicate(backend.node_of(objects[0])) == "is_table_or_desk"
         assert backend.label_of(objects[0]) == want, rule
+    for d in dets:  # no channel label: the name detected most often
+        d.pop("geometric_label")
+    backend = ConceptGraphsBackend("comod", class_names=["chair", "desk", "table"], merge=True)
+    assert backend.label_of(run(backend, copy.deepcopy(dets))[0]) == "desk"
     with pytest.raises(ValueError, match="label_rule"):
         ConceptGraphsBackend("comod", label_rule="vote")
 
@@ -174,12 +181,15 @@ def test_open_vocabulary_lets_geometry_contradict_an_unshipped_class() -> None:
     dets = stream(45, ("lamp", "sofa"))
     for d in dets:
         d["geometric_label"] = "sofa"
-    old = ConceptGraphsBackend("comod", vocabulary=ClassVocabulary.default())  # the closed ScanNet table: is_lamp unverified
+    old = ConceptGraphsBackend("comod", vocabulary="scannet")  # the closed ScanNet table: is_lamp is unverified
     objs = run(old, copy.deepcopy(dets))
     assert "is_lamp" not in old.table
-    new = ConceptGraphsBackend("comod", vocabulary=ClassVocabulary.open_vocabulary(names))
+    new = ConceptGraphsBackend("comod", class_names=names)  # the default: the class list's own vocabulary
     objs = run(new, copy.deepcopy(dets))
     assert new.table.outcome("is_lamp", "sofa") == 0
+    assert new.label_of(objs[0]) == "sofa"
+    same = ConceptGraphsBackend("comod", vocabulary=ClassVocabulary.open_vocabulary(names))
+    assert same.table.specs == new.table.specs
     b = new.beliefs(objs[0])
     assert b["is_lamp"].mean < b["is_sofa"].mean
 

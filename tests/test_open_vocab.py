@@ -30,7 +30,30 @@ def test_concrete_classes_exclude_each_other(table: SubsumptionTable) -> None:
     assert "is_wall" not in table
 
 
-def test_synonyms_and_hyponyms_share_a_predicate(table: SubsumptionTable) -> None:
+def test_separate_classes_stay_separate_unless_merged(table: SubsumptionTable) -> None:
+    """The class list had chair / armchair and table / desk as separate classes: separate predicates."""
+    assert {"is_chair", "is_armchair", "is_office_chair", "is_table", "is_desk"} <= set(table.predicates)
+    assert table.outcome("is_table", "desk") == 0 and table.outcome("is_desk", "table") == 0
+    assert table.outcome("is_chair", "armchair") == 0
+    merged = derive_table(CLASSES, "indoor", ignore=["wall"], merge=["is_table_or_desk"])
+    assert merged.outcome("is_table_or_desk", "desk") == 1 and "is_armchair" in merged
+    with pytest.raises(ValueError, match="is_tables"):
+        derive_table(CLASSES, "indoor", merge=["is_tables"])
+
+
+def test_synonyms_merge_plurals_and_case_fold() -> None:
+    t = derive_table(["Sofa", "couch", "Chair", "chairs", "TV", "television", "lamp"], "indoor")
+    assert t.predicate_for_class("couch") == t.predicate_for_class("sofa") == "is_sofa"
+    assert t.predicate_for_class("chairs") == t.predicate_for_class("Chair") == "is_chair"
+    assert t.predicate_for_class("television") == "is_tv"
+    assert set(t.predicates) == {"is_sofa", "is_chair", "is_tv", "is_lamp"}
+    assert t.outcome("is_tv", "sofa") == 0 and t.outcome("is_sofa", "couch") == 1
+    only_tv = derive_table(["tv", "sofa"], "indoor")  # a synonym outside the list still names its class
+    assert only_tv.outcome("is_tv", "television") == 1 and only_tv.outcome("is_sofa", "television") == 0
+
+
+def test_synonyms_and_hyponyms_share_a_predicate_when_merged() -> None:
+    table = derive_table(CLASSES, "indoor", ignore=["wall"], merge=True)
     for lab in ("chair", "armchair", "office chair", "office_chair"):
         assert table.outcome("is_chair", lab) == 1
     assert table.outcome("is_table_or_desk", "desk") == 1 and table.outcome("is_table_or_desk", "table") == 1
@@ -51,7 +74,7 @@ def test_ambiguous_and_hypernym_labels(table: SubsumptionTable) -> None:
 
 
 def test_mapping_into_a_coarser_channel() -> None:
-    t = derive_table("scannet200", "indoor", "scannet200_nyu40", ignore=["wall", "floor", "ceiling"])
+    t = derive_table("scannet200", "indoor", "scannet200_nyu40", ignore=["wall", "floor", "ceiling"], merge=True)
     assert t.outcome("is_tv", "television") == 1
     assert t.outcome("is_tv", "sofa") == 0
     assert t.outcome("is_chair", "chair") == 1  # every ScanNet200 class NYU40 calls chair is in is_chair
@@ -75,6 +98,7 @@ def test_class_vocabulary_open_vocabulary_yaml() -> None:
     assert v.predicate("wall") is None
     assert v.table().outcome("is_tv", "sofa") == 0
     v2 = ClassVocabulary.open_vocabulary(["couch", "tv"], taxonomy="indoor")
+    assert ClassVocabulary.open_vocabulary(["armchair", "chair"]).predicate("armchair") == "is_armchair"
     assert v2.predicate("couch") == "is_sofa" and v2.table().outcome("is_sofa", "tv") == 0
 
 
@@ -140,7 +164,13 @@ def test_cg_vocabulary_rejects_mixed_keys(tmp_path: Path) -> None:
 def test_vocab_check_cli(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     assert cli_main(["vocab", "check", "coco80", "--predicate", "is_tv"]) == 0
     out = capsys.readouterr().out
-    assert "is_tv  [tv]" in out and "T: ['tv']" in out
+    assert "is_tv  [tv]" in out and "T: ['television', 'tv'," in out  # a synonym names the listed class
+    assert cli_main(["vocab", "check", "coco80", "--predicate", "is_dining_table"]) == 0
+    assert cli_main(["vocab", "check", "scannet200", "--predicate", "is_desk"]) == 0  # separate by default
+    capsys.readouterr()
+    assert cli_main(["vocab", "check", "scannet200", "--merge", "is_table_or_desk", "--predicate",
+                     "is_table_or_desk"]) == 0
+    assert "desk" in capsys.readouterr().out
     lst = tmp_path / "mine.txt"
     lst.write_text("sofa\ntv\notherprop\n")
     assert cli_main(["vocab", "check", str(lst), "--matrix"]) == 0
@@ -162,7 +192,7 @@ def test_vocab_check_cli(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> 
 
 def test_from_class_list_is_a_deprecated_derive_table(table: SubsumptionTable) -> None:
     with pytest.warns(DeprecationWarning, match="derive_table"):
-        old = SubsumptionTable.from_class_list(CLASSES, "indoor", ignore=["wall"])
+        old = SubsumptionTable.from_class_list(CLASSES, "indoor", ignore=["wall"])  # no merge, as derive_table
     assert old.specs == table.specs and old.labels == table.labels and old.name == table.name
     assert old.ambiguous_labels == table.ambiguous_labels and "otherprop" in old.ambiguous_labels
 

@@ -13,7 +13,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("result", help="ConceptGraphs map (pcd_saves/full_pcd_*.pkl.gz or pcd_*.pkl.gz)")
     parser.add_argument("--operator", default="comod", help="fusion operator (default: comod)")
     parser.add_argument("--vocab", default=None,
-                        help="class-name vocabulary YAML (default: sgbelief/configs/conceptgraphs/scannet.yaml)")
+                        help="vocabulary: a sgbelief/configs/conceptgraphs YAML or shipped name (scannet: the closed "
+                             "ScanNet table; scannet200, coco80, replica) (default: the map's own class list, each "
+                             "class its own predicate, synonyms merged)")
+    parser.add_argument("--merge", default=None, metavar="PRED[,PRED]|all",
+                        help="with the default vocabulary: also merge these taxonomy groups (is_table_or_desk), "
+                             "or 'all'")
     parser.add_argument("--context", default="conceptgraphs", help="context tag kappa of the events (default: %(default)s)")
     parser.add_argument("--operator-config", default=None, help="operator config YAML (default: sgbelief/configs/operators/default.yaml)")
     parser.add_argument("--out", default="results/import-cg", help="output directory for graph.json (or graph.npz) and labels.json (default: %(default)s)")
@@ -38,8 +43,12 @@ def run(args: argparse.Namespace) -> int:
 
         first = False if (args.first_pose or "").lower() == "none" else args.first_pose
         channel = scannet_mesh_channel(args.channel, first_pose=first)
+    merge: bool | list[str] = False
+    if args.merge:
+        merge = True if args.merge.strip().lower() == "all" else [m.strip() for m in args.merge.split(",") if m.strip()]
     backend = ConceptGraphsBackend(args.operator, vocabulary=args.vocab, context=args.context,
-                                   operator_config=args.operator_config, channel=channel)
+                                   operator_config=args.operator_config, channel=channel, merge=merge,
+                                   print_summary=False)
     with console.progress(desc="import-cg", unit="det") as bar:
         def advance(done: int, total: int) -> None:
             bar.total = total
@@ -50,10 +59,13 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     graph_path = backend.graph.save(out / f"graph.{args.graph_format}")
     atomic_write_text(out / "labels.json", json.dumps(summary.labels, indent=2, default=str))
+    report = backend.summary()
+    atomic_write_text(out / "summary.json", json.dumps(report.to_dict(), indent=1))
     changed = sum(1 for v in summary.labels.values() if v["belief"] != v["majority"])
     print(f"imported {summary.n_objects} objects, {summary.n_detections} detections, "
           f"{summary.n_events} evidence events ({args.operator})")
     print(f"labels differing from ConceptGraphs' majority vote: {changed}/{summary.n_objects}")
     print(f"objects left unknown (nothing commits): {summary.n_unknown}/{summary.n_objects}")
-    print(f"wrote {graph_path} and {out / 'labels.json'}")
+    print(report.format())
+    print(f"wrote {graph_path}, {out / 'labels.json'} and {out / 'summary.json'}")
     return 0

@@ -19,6 +19,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     check.add_argument("--mapping", default=None,
                        help="label mapping YAML or shipped name (scannet200_nyu40, coco80_nyu40): the channel's labels")
     check.add_argument("--ignore", default="wall,floor,ceiling", help="comma-separated classes with no predicate")
+    check.add_argument("--merge", default=None, metavar="PRED[,PRED]|all",
+                       help="also merge these taxonomy groups of kinds into one predicate (is_table_or_desk), or "
+                            "'all' (default: classes listed separately stay separate; only synonyms merge)")
     check.add_argument("--matrix", action="store_true", help="print the full predicate x label matrix")
     check.add_argument("--predicate", action="append", default=None, help="only this predicate (repeatable)")
     check.add_argument("--json", action="store_true", help="machine-readable output")
@@ -53,7 +56,10 @@ def _table(args: argparse.Namespace):  # noqa: ANN202
             return SubsumptionTable.shipped(args.vocab)  # a hand-written shipped table (scannet, kitti360)
     from sgbelief.fusion.open_vocab import derive_table
 
-    return derive_table(args.vocab, args.taxonomy, args.mapping, ignore=ignore)
+    merge: bool | list[str] = False
+    if args.merge:
+        merge = True if args.merge.strip().lower() == "all" else [m.strip() for m in args.merge.split(",") if m.strip()]
+    return derive_table(args.vocab, args.taxonomy, args.mapping, ignore=ignore, merge=merge)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -103,6 +103,9 @@ class FrameLabels:
         return self.labels.get(node)
 
 
+_UNSEEN = object()
+
+
 class LabelImageChannel:
     """Geometric channel from per-frame label images (semantic segmentation, or instances + a table).
 
@@ -118,6 +121,11 @@ class LabelImageChannel:
     :meth:`label_detection` reads a ConceptGraphs detection dict (``mask[k]``, ``image_idx[k]``);
     the backend calls it for the claim ``k`` it routes. ``label(node, t)`` has no mask and returns None.
     ``keep_frames`` bounds how many frames are held (the oldest is dropped first).
+
+    ``vocabulary`` (a :class:`~sgbelief.fusion.compatibility.SubsumptionTable`, or anything with a
+    ``table()`` such as the ConceptGraphs backend's ``ClassVocabulary``): the class list is checked
+    against it when the channel is built (:meth:`check_vocabulary`); the ConceptGraphs backend
+    checks it against its own vocabulary in any case.
     """
 
     def __init__(
@@ -125,6 +133,7 @@ class LabelImageChannel:
         images: Mapping[int, Any] | Callable[[int], Any] | None = None,
         *,
         classes: Sequence[str] | Mapping[int, str] | None = None,
+        vocabulary: Any = None,
         min_purity: float = 0.5,
         min_pixels: int = 20,
         ignore_ids: Iterable[int] = (),
@@ -139,6 +148,8 @@ class LabelImageChannel:
             raise ValueError("min_pixels must be >= 1")
         self._source = images if callable(images) else None
         self._frames: dict[int, tuple[Any, Mapping[int, Any] | None]] = {}
+        #: per frame: (its image, smallest id, id range, id -> name) (see _frame_stats)
+        self._stats: dict[int, tuple[Any, int, int, dict[int, str | None], Any]] = {}
         if images is not None and not callable(images):
             for t, img in images.items():
                 self.set_frame(t, img)
@@ -155,6 +166,22 @@ class LabelImageChannel:
         self.keep_frames = keep_frames
         self.mask_key = mask_key
         self.frame_key = frame_key
+        if vocabulary is not None:
+            self.check_vocabulary(vocabulary)
+
+    def check_vocabulary(self, vocabulary: Any) -> list[str]:
+        """Check the class list against ``vocabulary`` (a subsumption table, or an object with
+        ``table()``), spellings folded (case, plural, space / hyphen / underscore). Raises
+        :class:`~sgbelief.errors.ChannelMismatchError` when no class name matches; warns
+        (``UnmatchedLabelWarning``) naming those that match nothing; returns them."""
+        from sgbelief.fusion.label_match import check_class_names
+
+        table = vocabulary.table() if hasattr(vocabulary, "table") and callable(vocabulary.table) else vocabulary
+        if table is None or not self.classes:
+            return []
+        names = list(dict.fromkeys(n for i, n in self.classes.items()
+                                   if i not in self.ignore_ids and n not in self.ignore_labels))
+        return check_class_names(names, table, what="LabelImageChannel class list")
 
     def set_frame(self, t: int, image: Any, instance_classes: Mapping[int, Any] | None = None) -> None:
         """The label image of frame ``t`` (and, for an instance image, its instance -> class table)."""
@@ -213,11 +240,21 @@ class LabelImageChannel:
             values = image[m]
         if values.size < self.min_pixels:
             return None
-        ids, counts = np.unique(values, return_counts=True)
+        lo, span, names = self._frame_stats(t, image, table)
+        if span < 65536:  # a small id range (class or instance ids): a histogram, not a sort
+            hist = np.bincount((values - lo if lo else values).astype(np.intp, copy=False), minlength=1)
+            ids = np.flatnonzero(hist)
+            counts = hist[ids]
+            ids = ids + lo
+        else:
+            ids, counts = np.unique(values, return_counts=True)
         totals: dict[str, int] = {}
         labelled = 0
+        name_of = self._name
         for v, c in zip(ids.tolist(), counts.tolist()):
-            name = self._name(v, table)
+            name = names.get(v, _UNSEEN)
+            if name is _UNSEEN:
+                name = names[v] = name_of(v, table)
             if name is None:
                 continue
             totals[name] = totals.get(name, 0) + c
@@ -226,6 +263,19 @@ class LabelImageChannel:
             return None
         best = max(sorted(totals), key=lambda n: totals[n])  # ties: alphabetical
         return best if totals[best] >= self.min_purity * labelled else None
+
+    def _frame_stats(self, t: int, image: Any, table: Any) -> tuple[int, int, dict[int, str | None]]:
+        """(smallest id, id range, id -> name so far) of frame ``t``'s image and instance table,
+        computed once per frame."""
+        key = int(t)
+        held = self._stats.get(key)
+        if held is None or held[0] is not image or held[4] is not table:
+            if len(self._stats) > len(self._frames) + 8:  # drop the stats of frames no longer held
+                for old in [k for k in self._stats if k not in self._frames]:
+                    del self._stats[old]
+            lo, hi = (int(image.min()), int(image.max())) if image.size else (0, 0)
+            held = self._stats[key] = (image, lo, hi - lo, {}, table)
+        return held[1], held[2], held[3]
 
     def label_detection(self, detection: Mapping[str, Any], index: int, t: int) -> str | None:
         """Label of entry ``index`` of a ConceptGraphs detection / object dict (its mask and frame)."""

@@ -38,6 +38,21 @@ def normalise_class_name(name: str) -> str:
     return re.sub(r"[^0-9a-z]+", "_", name.strip().lower()).strip("_")
 
 
+def singular_name(key: str) -> str:
+    """A normalised name's singular, for matching spellings: ``chairs`` -> ``chair``, ``shelves`` ->
+    ``shelf``, ``boxes`` -> ``box``, ``bodies`` -> ``body``; the last word only (``office_chairs``)."""
+    head, _, last = key.rpartition("_")
+    if len(last) > 3 and last.endswith("ies"):
+        last = last[:-3] + "y"
+    elif len(last) > 3 and last.endswith("ves"):
+        last = last[:-3] + "f"
+    elif len(last) > 3 and last.endswith(("sses", "xes", "zes", "ches", "shes")):
+        last = last[:-2]
+    elif len(last) > 2 and last.endswith("s") and not last.endswith(("ss", "us", "is")):
+        last = last[:-1]
+    return f"{head}_{last}" if head else last
+
+
 #: where the deprecated ``SubsumptionTable.from_class_list`` lives now (module, name)
 _FROM_CLASS_LIST_HOME = ("sgbelief.fusion.open_vocab", "derive_table")
 

@@ -19,6 +19,12 @@ def _auto_id() -> str:
     return f"e{next(_ids)}"
 
 
+def next_event_id() -> str:
+    """The next automatic event id (what an event built without ``id`` gets): for events built with
+    :meth:`EvidenceEvent.trusted` from parts already checked."""
+    return f"e{next(_ids)}"
+
+
 @dataclass(frozen=True, slots=True)
 class EvidenceEvent:
     """One foundation-model claim (Def. 2).

@@ -4,10 +4,12 @@ ConceptGraphs runs with open class lists (ScanNet200, Replica, COCO-80, a user's
 hand-written negative sets, the table is derived:
 
 * every class name of the detector's list is a *concrete* class, and concrete classes are mutually
-  exclusive (a geometric ``sofa`` contradicts ``is_tv``);
-* a taxonomy ``groups`` entry makes one predicate cover several class names (synonyms and
-  hyponyms: ``is_chair`` covers chair, armchair, office chair); every other class ``c`` gets the
-  predicate ``is_<c>``;
+  exclusive (a geometric ``sofa`` contradicts ``is_tv``): two names listed separately are two
+  predicates;
+* a taxonomy ``synonyms`` entry makes one predicate cover the names that mean the same thing
+  (``is_sofa``: sofa, couch); a ``groups`` entry (kinds: ``is_table_or_desk``: table, desk, coffee
+  table) does the same only when asked (``merge=True``, or ``merge=[predicate, ...]``), since the
+  class list had them as separate classes; every other class ``c`` gets the predicate ``is_<c>``;
 * ``hypernyms`` are general labels that stand for several classes (``seating``: chair, sofa,
   bench); ``ambiguous`` labels (``otherprop``, ``object``) stand for nothing decidable.
 
@@ -29,10 +31,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
 from sgbelief.errors import FormatError
-from sgbelief.fusion.compatibility import PredicateSpec, SubsumptionTable, normalise_class_name
+from sgbelief.fusion.compatibility import PredicateSpec, SubsumptionTable, normalise_class_name, singular_name
 
 __all__ = ["Taxonomy", "LabelMapping", "ClassList", "load_class_list", "derive_table", "verdict_matrix"]
 
@@ -43,6 +45,7 @@ class TaxonomyFile(BaseModel):
     format: str = "sgbelief.taxonomy"
     version: int = 1
     name: str = "taxonomy"
+    synonyms: dict[str, list[str]] = {}
     groups: dict[str, list[str]] = {}
     hypernyms: dict[str, list[str]] = {}
     ambiguous: list[str] = []
@@ -54,21 +57,32 @@ class TaxonomyFile(BaseModel):
             raise ValueError(f"expected 'sgbelief.taxonomy', got {v!r}")
         return v
 
-    @field_validator("groups")
+    @field_validator("groups", "synonyms")
     @classmethod
-    def _groups(cls, v: dict[str, list[str]]) -> dict[str, list[str]]:
+    def _groups(cls, v: dict[str, list[str]], info: Any) -> dict[str, list[str]]:
+        kind = "group" if info.field_name == "groups" else "synonym set"
         seen: dict[str, str] = {}
         for pred, names in v.items():
             if not pred.startswith("is_"):
-                raise ValueError(f"group {pred!r}: predicate names start with 'is_'")
+                raise ValueError(f"{kind} {pred!r}: predicate names start with 'is_'")
             if not names:
-                raise ValueError(f"group {pred!r}: at least one class name is required")
+                raise ValueError(f"{kind} {pred!r}: at least one class name is required")
             for n in names:
                 key = normalise_class_name(n)
                 if key in seen and seen[key] != pred:
-                    raise ValueError(f"class {n!r} is in both group {seen[key]!r} and group {pred!r}")
+                    raise ValueError(f"class {n!r} is in both {kind} {seen[key]!r} and {kind} {pred!r}")
                 seen[key] = pred
         return v
+
+    @model_validator(mode="after")
+    def _synonyms_inside_groups(self) -> TaxonomyFile:
+        group_of = {normalise_class_name(n): g for g, names in self.groups.items() for n in names}
+        for pred, names in self.synonyms.items():
+            met = {group_of.get(normalise_class_name(n)) for n in names}
+            if met != {None} and len(met) != 1:
+                raise ValueError(f"synonym set {pred!r} meets a group but does not lie inside one "
+                                 f"(groups: {sorted(g for g in met if g)})")
+        return self
 
 
 class LabelMappingFile(BaseModel):
@@ -151,12 +165,14 @@ def _validate(model: type[BaseModel], data: Any, path: Path, lines: dict[tuple[s
 
 @dataclass(frozen=True)
 class Taxonomy:
-    """Predicate groups (synonyms / hyponyms), hypernym labels and ambiguous labels."""
+    """Synonym sets (always one predicate), groups of kinds (one predicate when merged), hypernym
+    labels and ambiguous labels."""
 
     groups: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     hypernyms: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     ambiguous: frozenset[str] = frozenset()
     name: str = "taxonomy"
+    synonyms: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> Taxonomy:
@@ -169,7 +185,8 @@ class Taxonomy:
     def from_model(cls, parsed: TaxonomyFile) -> Taxonomy:
         return cls(groups={k: tuple(v) for k, v in parsed.groups.items()},
                    hypernyms={normalise_class_name(k): tuple(v) for k, v in parsed.hypernyms.items()},
-                   ambiguous=frozenset(normalise_class_name(a) for a in parsed.ambiguous), name=parsed.name)
+                   ambiguous=frozenset(normalise_class_name(a) for a in parsed.ambiguous), name=parsed.name,
+                   synonyms={k: tuple(v) for k, v in parsed.synonyms.items()})
 
     @classmethod
     def shipped(cls, name: str = "indoor") -> Taxonomy:
@@ -186,9 +203,29 @@ class Taxonomy:
         p = Path(spec)
         return cls.from_yaml(p) if p.suffix in (".yaml", ".yml") or p.exists() else cls.shipped(str(spec))
 
-    def predicate_of(self) -> dict[str, str]:
-        """normalised class name -> its group's predicate."""
-        return {normalise_class_name(n): pred for pred, names in self.groups.items() for n in names}
+    def predicate_of(self, merge: bool | Iterable[str] = False) -> dict[str, str]:
+        """normalised class name -> its predicate: the synonym set's, or, for the groups being
+        merged (``merge``: True for every group, or the group predicates to merge), the group's."""
+        out = {normalise_class_name(n): pred for pred, names in self.synonyms.items() for n in names}
+        merged = _merged_groups(self, merge)
+        for pred in merged:
+            for n in self.groups[pred]:
+                out[normalise_class_name(n)] = pred
+        return out
+
+
+def _merged_groups(tax: Taxonomy, merge: bool | Iterable[str]) -> list[str]:
+    """The group predicates ``merge`` names (True: all of the taxonomy's); an unknown name is an error."""
+    if merge is True:
+        return list(tax.groups)
+    if merge is False or merge is None:
+        return []
+    names = [merge] if isinstance(merge, str) else list(merge)
+    unknown = [n for n in names if n not in tax.groups]
+    if unknown:
+        raise ValueError(f"merge: {unknown[0]!r} is no group of taxonomy {tax.name!r} "
+                         f"(groups: {', '.join(tax.groups) or 'none'})")
+    return names
 
 
 @dataclass(frozen=True)
@@ -308,8 +345,13 @@ def derive_table(
     *,
     ignore: Iterable[str] = (),
     name: str | None = None,
+    merge: bool | Iterable[str] = False,
 ) -> SubsumptionTable:
     """A :class:`SubsumptionTable` over the channel's labels for the detector's class list.
+
+    Classes listed separately get separate, mutually exclusive predicates, except names of one
+    synonym set of the taxonomy; ``merge`` (True, or group predicates such as
+    ``["is_table_or_desk"]``) also merges the taxonomy's groups of kinds.
 
     ``classes`` is the detector's vocabulary; ``mapping`` (optional) translates it into the
     geometric channel's labels (without it the channel speaks the detector's vocabulary).
@@ -320,11 +362,17 @@ def derive_table(
     cl = resolve_class_list(classes)
     tax = Taxonomy.resolve(taxonomy)
     mp = LabelMapping.resolve(mapping)
-    group_of = tax.predicate_of()
+    group_of = tax.predicate_of(merge)
     ignored = {normalise_class_name(n) for n in ignore}
     display = {normalise_class_name(n): n for n in cl.names}
     concrete = [k for k in display if k not in tax.ambiguous and k not in tax.hypernyms]
-    pred_of = {k: group_of.get(k, f"is_{k}") for k in concrete if k not in ignored}
+    pred_of: dict[str, str] = {}
+    for k in concrete:
+        if k in ignored:
+            continue
+        one = singular_name(k)  # "chairs" next to "chair" is the same class
+        base = one if one != k and one in display else k
+        pred_of[k] = group_of.get(k) or group_of.get(base) or group_of.get(one) or f"is_{base}"
     extension: dict[str, set[str]] = {}
     for k, pred in pred_of.items():
         extension.setdefault(pred, set()).add(k)
@@ -338,6 +386,13 @@ def derive_table(
             labels[display.get(h, h)] = frozenset(normalise_class_name(m) for m in members)
         for a in tax.ambiguous:
             labels[display.get(a, a)] = None
+        # a synonym of a listed class names that class (a channel's "television" for the list's "tv")
+        for names in tax.synonyms.values():
+            members = frozenset(normalise_class_name(n) for n in names) & set(concrete)
+            if members:
+                for n in names:
+                    if normalise_class_name(n) not in display:
+                        labels.setdefault(n, members)
     else:
         src = {normalise_class_name(k): v for k, v in mp.map.items()}
         inverse: dict[str, set[str]] = {}

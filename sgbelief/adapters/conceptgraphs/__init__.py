@@ -6,6 +6,9 @@ Usage in a ConceptGraphs run script (after its imports)::
     backend = ConceptGraphsBackend("comod", context="yolo-world-v8l/gsa-v1")
     backend.install()          # or: with backend.patch(): main()
 
+The vocabulary is the class list the run loads (or ``class_names=``); ``uninstall()`` prints what the
+backend did per class (``backend.summary()``).
+
 torch and open3d are imported only when ConceptGraphs data is touched.
 """
 
@@ -31,7 +34,10 @@ _EXPORTS = {
     "UnsafePickleError": "sgbelief.adapters.conceptgraphs.unpickler",
     "load_cg_result": "sgbelief.adapters.conceptgraphs.unpickler",
     "import_result": "sgbelief.adapters.conceptgraphs.importer",
-    "BackendSummary": "sgbelief.adapters.conceptgraphs.map_beliefs",
+    "BackendSummary": "sgbelief.adapters.conceptgraphs.summary",
+    "ClassSummary": "sgbelief.adapters.conceptgraphs.summary",
+    "ConceptGraphsNotFoundError": "sgbelief.adapters.conceptgraphs.patching",
+    "LabelResolver": "sgbelief.adapters.conceptgraphs.channel_labels",
     "PointCloudChannel": "sgbelief.adapters.conceptgraphs.channels",
     "scannet_mesh_channel": "sgbelief.adapters.conceptgraphs.channels",
     "LabelImageChannel": "sgbelief.fusion.channel",

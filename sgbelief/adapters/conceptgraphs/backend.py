@@ -8,9 +8,11 @@ of the detected ConceptGraphs generation through :class:`~.patching.Patcher`.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Iterator, Mapping, Sequence
+import sys
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from sgbelief._fast import gc as gc_tuning
 from sgbelief.adapters.conceptgraphs.functions import GenerationFunctions, make_functions
@@ -21,19 +23,31 @@ from sgbelief.adapters.conceptgraphs.map_beliefs import (
     DetectionLabelFn,
     MapBeliefs,
 )
-from sgbelief.adapters.conceptgraphs.patching import Patcher
-from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
+from sgbelief.adapters.conceptgraphs.patching import ConceptGraphsNotFoundError, Patcher
+from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary, normalise_class_name
 
-__all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "ConceptGraphsBackend", "DetectionLabelFn"]
+__all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "ConceptGraphsBackend", "ConceptGraphsNotFoundError",
+           "DetectionLabelFn"]
+
+#: classes ConceptGraphs treats as background: no predicate (they stay channel labels)
+BACKGROUND = ("wall", "floor", "ceiling")
 
 
 class ConceptGraphsBackend(MapBeliefs):
     """Routes every ConceptGraphs detection into a :class:`~sgbelief.graph.scene_graph.SceneGraph`.
 
+    The default vocabulary is the class list the run uses: ``class_names=``, else the list
+    ConceptGraphs loads (read when :meth:`install` has patched its loaders: ``create_or_load_colors``
+    / ``gobs_to_detection_list`` on ``main``, ``ObjectClasses`` on ``ali-dev``). Every class is its
+    own, mutually exclusive predicate; the taxonomy merges only synonyms (couch / sofa), ``merge=``
+    also merges its groups of kinds (table / desk). Should a claim arrive before any class list is
+    known, the vocabulary is derived from the class names detected so far, with a warning.
+
     Args:
         operator: operator name (``comod``, ``cal``, ``majority``, ...) or a FusionOperator instance.
-        vocabulary: a :class:`ClassVocabulary`, a path to ``sgbelief/configs/conceptgraphs/*.yaml`` or None
-            (shipped ScanNet vocabulary).
+        vocabulary: None (default: the run's class list, see above), a :class:`ClassVocabulary`, or a
+            file / shipped name of ``sgbelief/configs/conceptgraphs`` (``"scannet"``: the closed,
+            hand-written ScanNet table; ``"scannet200"``, ``"coco80"``, ``"replica"``).
         context: the context tag kappa (detector / VLM and prompt version) of every event.
         channel: optional geometric channel: a GeometricChannel (``label(node, t)``), or a callable
             ``fn(detection, node, t) -> str | None``.  A detection's own ``label_key`` entry wins.
@@ -51,11 +65,20 @@ class ConceptGraphsBackend(MapBeliefs):
         tau / tau_t: commit threshold and targeting-mass threshold (default: the operator config).
         on_filter: ``"mark"`` (node kept with ``cg_filtered=True``) or ``"remove"``.
         confidence_map: optional map of the detector's raw confidence before it enters an event.
+        class_names: the run's class list, by class id, or its file / shipped name (``"replica"``,
+            ``"scannet200"``) (default: the list ConceptGraphs loads).
+        taxonomy: the taxonomy of synonyms / groups / hypernyms the open vocabulary uses
+            (``"indoor"``, a YAML path or a :class:`~sgbelief.fusion.open_vocab.Taxonomy`).
+        merge: also merge the taxonomy's groups of kinds: True for every group, or the group
+            predicates (``["is_table_or_desk"]``). Default False: the class list's classes stay separate.
+        ignore: classes that get no predicate (background); ConceptGraphs' own background classes are added.
+        print_summary: :meth:`uninstall` prints :meth:`summary` (to this stream; True: stderr; False: never).
         gc_checkpoints: call :meth:`gc_checkpoint` once per frame (after the patched per-frame
             merge), so CPython's full collections never rescan the whole map.
         label_rule: the class written when the committed predicate covers several class names
-            (``is_table_or_desk``: table, desk): ``"most_frequent"`` (default: the name detected most
-            often on this object, ties to the first seen), ``"first"`` (the first name detected), or a
+            (``is_table_or_desk``: table, desk, when merged): ``"most_frequent"`` (default: the label
+            the geometric channel gave most often on this object when it names one of them, else the
+            name detected most often, ties to the first seen), ``"first"`` (the first name detected), or a
             mapping predicate -> class name (e.g. ``{"is_table_or_desk": "table"}``; predicates not in
             it fall back to most frequent). A mapped name that is a known class id keeps that id.
     """
@@ -76,24 +99,45 @@ class ConceptGraphsBackend(MapBeliefs):
         tau_t: float | None = None,
         on_filter: str = "mark",
         confidence_map: Callable[[float], float] | None = None,
-        class_names: Sequence[str] | None = None,
+        class_names: Sequence[str] | str | Path | None = None,
         gc_checkpoints: bool = False,
         label_rule: str | Mapping[str, str] = "most_frequent",
         geometric_evidence: str | None = None,
+        taxonomy: Any = "indoor",
+        merge: bool | Iterable[str] = False,
+        ignore: Iterable[str] = BACKGROUND,
+        print_summary: bool | TextIO = True,
     ) -> None:
         from sgbelief.api.scene_graph import SceneGraph
 
+        self.taxonomy = taxonomy
+        self.merge = merge if isinstance(merge, bool) else list(merge)
+        self.ignore = list(ignore)
+        self.print_summary = print_summary
+        #: where the vocabulary came from: "vocabulary=", "class_names=", a ConceptGraphs function, or None
+        self.vocabulary_source: str | None = None
+        if isinstance(class_names, (str, Path)):  # a class-list file or shipped name ("replica")
+            from sgbelief.fusion.open_vocab import resolve_class_list
+
+            class_names = list(resolve_class_list(class_names).names)
+        elif class_names is not None:
+            class_names = [str(n) for n in class_names]
         if isinstance(vocabulary, ClassVocabulary):
-            vocab = vocabulary
-        elif vocabulary is None:
-            vocab = ClassVocabulary.default()
-        else:
+            vocab: ClassVocabulary | None = vocabulary
+        elif vocabulary is not None:
             vocab = ClassVocabulary.from_yaml(vocabulary)
+        elif class_names is not None:
+            vocab = self._open_vocabulary(list(class_names), ())
+        else:
+            vocab = None
+        if vocab is not None:
+            self.vocabulary_source = "vocabulary=" if vocabulary is not None else "class_names="
+        self._growing = False
         if isinstance(operator, str):
             from sgbelief.api.operators import make_operator
 
             op = make_operator(operator, config=_with_geometric_evidence(operator_config, geometric_evidence),
-                               vocabulary=vocab.table())
+                               vocabulary=vocab.table() if vocab is not None else None)
             self.operator_name = operator
         else:
             op = operator
@@ -103,9 +147,72 @@ class ConceptGraphsBackend(MapBeliefs):
             context=context, channel=channel, label_key=label_key, unknown_label=unknown_label,
             unknown_class_id=unknown_class_id, tau=tau, tau_t=tau_t, on_filter=on_filter,
             confidence_map=confidence_map, class_names=class_names, label_rule=label_rule)
+        self._share_table = isinstance(operator, str) or getattr(op, "vocabulary", None) is None
         self._patcher: Patcher | None = None
         self.gc_checkpoints = bool(gc_checkpoints)
         self._froze = False
+        if vocab is not None:
+            self._check_channel_classes()
+
+    # ------------------------------------------------------------------ vocabulary
+    def _open_vocabulary(self, names: list[str], background: Iterable[str]) -> ClassVocabulary:
+        ignore = list(dict.fromkeys([*self.ignore, *background]))
+        return ClassVocabulary.open_vocabulary(names, taxonomy=self.taxonomy, ignore=ignore, merge=self.merge)
+
+    @property
+    def class_list_known(self) -> bool:
+        """Whether the vocabulary is settled (given, or learnt from the run's class list)."""
+        return self.vocabulary is not None and not self._growing
+
+    def learn_class_list(self, names: Sequence[str], *, background: Iterable[str] = (), source: str = "") -> None:
+        """The class list the run uses (called by the patched ConceptGraphs loaders): it becomes the
+        vocabulary unless one was given. A given ``class_names=`` that differs is warned about."""
+        names = [str(n) for n in names]
+        if self.class_list_known:
+            given = getattr(self.vocabulary, "class_names", None)
+            if self.vocabulary_source == "class_names=" and given is not None and \
+                    [normalise_class_name(n) for n in given] != [normalise_class_name(n) for n in names]:
+                warnings.warn(f"ConceptGraphs runs with a class list ({source}: {len(names)} classes) other than "
+                              f"the class_names= given ({len(given)}); the backend keeps class_names=",
+                              stacklevel=3)
+            return
+        if not names:
+            return
+        vocab = self._open_vocabulary(names, background)
+        vocab.name = f"{len(names)} classes from {source or 'the run'}"
+        self.set_vocabulary(vocab)
+        self._growing = False
+        self.vocabulary_source = source or "learn_class_list"
+        self.class_names.update(dict(enumerate(names)))
+        self._check_channel_classes()
+
+    def vocabulary_needed(self, class_name: str) -> ClassVocabulary:
+        """No class list known when a claim arrives: derive the vocabulary from the class names
+        detected so far (warned once); a new name re-derives it."""
+        vocab = self.vocabulary
+        if self._growing and vocab is not None and vocab.class_names:
+            known = list(vocab.class_names)
+        else:
+            known = list(dict.fromkeys(self.class_names.values()))
+        if not self._growing:
+            warnings.warn("ConceptGraphsBackend: no class list is known (pass class_names=, or call install() "
+                          "before ConceptGraphs loads its classes); the vocabulary is derived from the class "
+                          "names detected so far", stacklevel=4)
+            self._growing = True
+            self.vocabulary_source = "detected class names"
+        keys = {normalise_class_name(n) for n in known}
+        if normalise_class_name(class_name) in keys:
+            if vocab is not None and vocab.class_names is not None and len(vocab.class_names) == len(known):
+                return vocab
+            return self._open_vocabulary(known, ())
+        return self._open_vocabulary([*known, class_name], ())
+
+    def _check_channel_classes(self) -> None:
+        """A channel that declares its class list (``LabelImageChannel(classes=...)``) is checked
+        against the vocabulary: none matching raises, names matching nothing are warned about."""
+        check = getattr(self.channel, "check_vocabulary", None)
+        if check is not None and self.table is not None:
+            check(self.table)
 
     # ------------------------------------------------------------------ garbage collector
     def gc_checkpoint(self) -> None:
@@ -122,7 +229,9 @@ class ConceptGraphsBackend(MapBeliefs):
         self._froze = True
 
     def end_frame(self) -> None:
-        """Called by the patched per-frame merge functions: the per-frame housekeeping hook."""
+        """Called by the patched per-frame merge functions: the per-frame housekeeping hook (the
+        frame's queued events applied, then the garbage-collector checkpoint if enabled)."""
+        self.flush()
         if self.gc_checkpoints:
             self.gc_checkpoint()
 
@@ -137,19 +246,30 @@ class ConceptGraphsBackend(MapBeliefs):
         return make_functions(self, generation)
 
     def install(self, *modules: Any, generation: str | None = None, fix_list_kwargs: bool = True) -> None:
-        """Swap the belief-routing functions into ConceptGraphs' (already imported) modules."""
+        """Swap the belief-routing functions into ConceptGraphs' modules (imported here when the run
+        script has not imported them yet). Raises :class:`ConceptGraphsNotFoundError` naming what is
+        missing when they cannot be imported: the backend is never active with nothing patched."""
         if self._patcher is not None:
             raise RuntimeError("backend already installed; call uninstall() first")
         patcher = Patcher(self, extra_modules=modules, generation=generation, fix_list_kwargs=fix_list_kwargs)
-        patcher.install()
+        try:
+            patcher.install()
+        except BaseException:
+            patcher.uninstall()
+            self.active = False
+            raise
         self._patcher = patcher
         self.active = True
 
     def uninstall(self) -> None:
-        """Restore every name swapped by :meth:`install` (and unfreeze what :meth:`gc_checkpoint` froze)."""
+        """Restore every name swapped by :meth:`install` (and unfreeze what :meth:`gc_checkpoint` froze),
+        then print :meth:`summary` (``print_summary``)."""
         if self._patcher is not None:
             self._patcher.uninstall()
             self._patcher = None
+            stream = sys.stderr if self.print_summary is True else self.print_summary
+            if stream and self.routed_detections:
+                print(self.summary().format(), file=stream)
         if self._froze:
             gc_tuning.release_checkpoints()
             self._froze = False
@@ -176,10 +296,22 @@ class ConceptGraphsBackend(MapBeliefs):
         return log_frame(self.graph, frame, recording=recording, prefix=prefix, tau=self.tau, timeline=timeline)
 
     def save(self, path: str | Path) -> Path:
-        """Save the belief graph (SceneGraph JSON)."""
-        from sgbelief.graph.persistence import save_graph
+        """Save the belief graph (SceneGraph JSON), and :meth:`summary` as JSON beside it
+        (``<stem>.summary.json``)."""
+        import json
 
-        return save_graph(self.graph, path)
+        from sgbelief.graph.persistence import atomic_write_text, save_graph
+
+        self.flush()
+        out = save_graph(self.graph, path)
+        atomic_write_text(summary_path(out), json.dumps(self.summary().to_dict(), indent=1))
+        return out
+
+
+def summary_path(map_path: str | Path) -> Path:
+    """Where the backend's summary of a map saved at ``map_path`` goes: ``<stem>.summary.json`` beside it."""
+    p = Path(map_path)
+    return p.with_name(f"{p.name.split('.')[0]}.summary.json")
 
 
 def _with_geometric_evidence(config: Any, geometric_evidence: str | None) -> Any:

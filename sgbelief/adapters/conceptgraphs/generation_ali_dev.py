@@ -18,6 +18,7 @@ from sgbelief.adapters.conceptgraphs.generation_base import (
     NEG_INF,
     BeliefLabelledObject,
     GenerationFunctions,
+    as_numpy,
     counter_update,
     same_list_type,
 )
@@ -42,6 +43,7 @@ class AliDevGeneration(GenerationFunctions):
         then relabel the other objects whose beliefs changed (a merge, a queue resolution)."""
         backend = self.backend
         labelled = self.labelled
+        graph = backend.graph
         for k, node in seen:
             obj = objects[k]
             if not isinstance(obj, BeliefLabelledObject):
@@ -49,7 +51,7 @@ class AliDevGeneration(GenerationFunctions):
                 backend.identity.rebind(obj, node)
                 objects[k] = obj
             labelled[node] = obj
-            obj.set_belief_label(backend.label_of(obj))
+            obj.set_belief_label(backend.node_label(node) if node in graph else None)
             changed.discard(node)
         for node in changed:
             obj = labelled.get(node)
@@ -95,9 +97,17 @@ class AliDevGeneration(GenerationFunctions):
                           dbscan_remove_noise: bool, dbscan_eps: float, dbscan_min_points: int,
                           spatial_sim_type: str, device: Any) -> Any:
         """Merge matched detections (beliefs spread with the scores of the last match call)."""
+        with self.backend.batch():  # the frame's events: one update_many call
+            return self._merge_obj_matches(detection_list, objects, match_indices, downsample_voxel_size,
+                                           dbscan_remove_noise, dbscan_eps, dbscan_min_points, spatial_sim_type,
+                                           device)
+
+    def _merge_obj_matches(self, detection_list: Any, objects: Any, match_indices: list, downsample_voxel_size: float,
+                           dbscan_remove_noise: bool, dbscan_eps: float, dbscan_min_points: int,
+                           spatial_sim_type: str, device: Any) -> Any:
         backend = self.backend
         last = self.last_match
-        sims = last[0] if last is not None and last[1] is match_indices else None
+        sims = as_numpy(last[0]) if last is not None and last[1] is match_indices else None
         thr = last[2] if sims is not None else NEG_INF
         n_before = len(objects)
         touched = self.frame_start(objects)
@@ -119,8 +129,11 @@ class AliDevGeneration(GenerationFunctions):
                 targets = {backend.ensure_node(objects[j]): 1.0}
                 touched.add(j)
             backend.route_detection(det, targets)
+            if backend.pending_dict(objects[j]):  # a queued claim still reads this dict: apply first
+                backend.flush()
             objects[j] = self.geo_merge(objects[j], det, downsample_voxel_size, dbscan_remove_noise, dbscan_eps,
                                         dbscan_min_points, spatial_sim_type, device, False)
+            self.merged.add(id(objects[j]))
         if tracker is not None:  # ConceptGraphs' MappingTracker counters, updated as the original does
             counter_update(lambda: tracker.increment_total_merges(len(match_indices) - match_indices.count(None)))
             counter_update(lambda: tracker.increment_total_objects(len(objects) - count_before))

@@ -71,6 +71,23 @@ class BeliefLabelledObject(dict):
         return copy.deepcopy(dict(self), memo)
 
 
+def as_numpy(scores: Any) -> np.ndarray:
+    """An association-score matrix (a torch tensor or an array) as a float numpy array."""
+    if hasattr(scores, "detach"):
+        scores = scores.detach().cpu().numpy()
+    return np.asarray(scores, dtype=float)
+
+
+def candidate_matrix(scores: np.ndarray, threshold: float) -> list[list[int]]:
+    """Per row, the positions whose score is finite, above ``threshold`` and positive (the targeting
+    candidates of :meth:`MapBeliefs.targets_for`), for a whole frame in a few array operations."""
+    rows, cols = np.nonzero(np.isfinite(scores) & (scores > threshold) & (scores > 0))
+    out: list[list[int]] = [[] for _ in range(scores.shape[0])]
+    for r, c in zip(rows.tolist(), cols.tolist()):
+        out[r].append(c)
+    return out
+
+
 def vote_dtype_scalar(class_ids: Any, cid: int) -> Any:
     """``cid`` as the numpy scalar type ``np.unique(np.asarray(class_ids))`` would give (int64 if not integral)."""
     dtype = getattr(class_ids, "dtype", None)
@@ -124,6 +141,8 @@ class GenerationFunctions:
         #: map-list length after the last label sync; objects appended beyond it by the script itself
         #: (the first frame's ``extend``) are registered at the next per-frame merge
         self.synced_len = 0
+        #: ids of the map objects a detection was merged into since the last sync
+        self.merged: set[int] = set()
 
     def original(self, name: str) -> Any:
         """ConceptGraphs' own function ``name``, or None when none was captured."""
@@ -147,11 +166,18 @@ class GenerationFunctions:
         self.synced_len = len(objects)
         backend = self.backend
         seen: list[tuple[int, Any]] = []
+        # an object whose node was added this frame has its geometry already, unless a detection
+        # was merged into it since: its summary is computed once, not twice
+        fresh, merged = backend.fresh_geometry, self.merged
         for k in positions:
             obj = objects[k]
             node = backend.ensure_node(obj)
-            backend.refresh_geometry(obj)
+            if id(obj) not in fresh or id(obj) in merged:
+                backend.refresh_geometry(obj)
             seen.append((k, node))
+        fresh.clear()
+        merged.clear()
+        backend.flush()
         self.write_labels(objects, seen, backend.take_changed_nodes())
 
     def write_labels(self, objects: Any, seen: list[tuple[int, Any]], changed: set[Any]) -> None:
@@ -163,6 +189,8 @@ class GenerationFunctions:
         """The touched-position set for a per-frame merge, seeded with objects the script appended itself."""
         touched = self.touched
         touched.clear()
+        self.merged.clear()
+        self.backend.fresh_geometry.clear()  # only objects registered during this merge count as fresh
         start = self.synced_len if self.synced_len <= len(objects) else 0
         touched.update(range(start, len(objects)))
         return touched
@@ -177,20 +205,36 @@ class GenerationFunctions:
     def assign(self, detection_list: Any, objects: Any, agg_sim: Any, threshold: float, merge_one: MergeOne) -> Any:
         """Association loop: a new object when the row has no candidate, else spread the beliefs
         over the candidates and merge the geometry into the argmax."""
+        with self.backend.batch():  # the frame's events: one update_many call
+            return self._assign(detection_list, objects, agg_sim, threshold, merge_one)
+
+    def _assign(self, detection_list: Any, objects: Any, agg_sim: Any, threshold: float, merge_one: MergeOne) -> Any:
         backend = self.backend
         touched = self.frame_start(objects)
-        for i in range(agg_sim.shape[0]):
-            row = agg_sim[i]
+        scores = as_numpy(agg_sim)  # one conversion per frame, not one per row
+        n_rows = scores.shape[0]
+        if scores.shape[1]:
+            best_of, max_of = scores.argmax(axis=1).tolist(), scores.max(axis=1).tolist()
+            n = min(scores.shape[1], len(objects))  # candidates of every row at once (see targets_for)
+            cands = candidate_matrix(scores[:, :n], threshold)
+        else:
+            best_of, max_of, cands = [0] * n_rows, [NEG_INF] * n_rows, None
+        for i in range(n_rows):
             det = detection_list[i]
-            if float(row.max()) <= threshold or float(row.max()) == NEG_INF:
+            top = max_of[i]
+            if top <= threshold or top == NEG_INF:
                 objects.append(det)
                 backend.ensure_node(det)
                 touched.add(len(objects) - 1)
                 continue
-            j = int(row.argmax())
-            targets = backend.targets_for(row, j, objects, threshold, touched)
+            j = best_of[i]
+            targets = backend.targets_for(scores[i], j, objects, threshold, touched,
+                                          candidates=None if cands is None else cands[i])
             backend.route_detection(det, targets)
+            if backend.pending_dict(objects[j]):  # a queued claim still reads this dict: apply first
+                backend.flush()
             objects[j] = merge_one(objects[j], det)
+            self.merged.add(id(objects[j]))
         self.sync_labels(objects, touched)
         backend.end_frame()
         return objects
@@ -213,6 +257,7 @@ class GenerationFunctions:
                 # tombstones make sure its evidence still migrates only once
                 backend.migrate(objects[j], objects[i])
                 objects[j] = merge_one(objects[j], objects[i])
+                self.merged.add(id(objects[j]))
                 kept[i] = False
         index_updates: list[int | None] = []
         cur = 0

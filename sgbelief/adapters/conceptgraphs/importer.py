@@ -55,6 +55,14 @@ def import_result(results: Any, backend: Any, *, path: Any = None, progress: Any
     objects, class_names = _objects_of(results, path)
     if class_names:
         backend.class_names.update(dict(enumerate(class_names)))
+    learn = getattr(backend, "learn_class_list", None)
+    if learn is not None and not backend.class_list_known:
+        # the default vocabulary: the map's class list, else every class name its objects claim
+        if class_names:
+            learn(class_names, source="the map's class_names")
+        else:
+            seen = {c.class_name: None for _, obj in objects for c in backend.claims_of(obj)}
+            learn(list(seen), source="the map's detected class names")
     claims: list[tuple[int, int, int, str, dict]] = []
     for order, (node, obj) in enumerate(objects):
         centroid, bbox = geometry_summary(obj)

@@ -4,87 +4,32 @@ they are swapped in (:mod:`.generation_main`, :mod:`.generation_ali_dev`, :mod:`
 
 from __future__ import annotations
 
+import contextlib
 from collections import Counter
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import Any, NamedTuple
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
+from sgbelief.adapters.conceptgraphs.channel_labels import LabelResolver
+from sgbelief.adapters.conceptgraphs.claims import (
+    DEFAULT_LABEL_KEY,
+    Claim,
+    DetectionLabelFn,
+    EventChannel,
+    read_claims,
+)
 from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
 from sgbelief.adapters.conceptgraphs.identity import IdentityMap
+from sgbelief.adapters.conceptgraphs.labels_out import LabelReader
+from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClaimCounts
 from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
+from sgbelief.errors import InvalidEventError
+from sgbelief.fusion.events import EvidenceEvent, next_event_id
 
-#: detection-dict key a segmenter-running pipeline may set to the geometric label of that detection
-DEFAULT_LABEL_KEY = "geometric_label"
+__all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "DetectionLabelFn", "MapBeliefs"]
 
-DetectionLabelFn = Callable[[dict, Any, int], "str | None"]
-
-
-class Claim(NamedTuple):
-    """One per-detection claim read from a ConceptGraphs object dict."""
-
-    class_id: int | None
-    class_name: str
-    confidence: float
-    t: int
-
-
-class _EventChannel:
-    """Geometric channel for one event: the detection's own label first, then the configured channel.
-
-    A configured channel with ``label_detection(detection, index, t)`` (a :class:`DetectionChannel`
-    such as :class:`~sgbelief.fusion.channel.LabelImageChannel`) is asked about entry ``index`` of
-    the detection dict; any other channel through ``label(node, t)``.
-    """
-
-    __slots__ = ("_label", "_detection", "_fallback", "_fn", "_index", "answers")
-
-    def __init__(self, label: str | None, detection: dict | None, fallback: Any, fn: DetectionLabelFn | None,
-                 index: int = 0) -> None:
-        self._label = label
-        self._detection = detection
-        self._fallback = fallback
-        self._fn = fn
-        self._index = index
-        #: the labels this channel gave, per node asked (the operator asks once per target)
-        self.answers: dict[Any, str] = {}
-
-    def label(self, node: Any, t: int) -> str | None:
-        value = self._ask(node, t)
-        if value is not None:
-            self.answers[node] = value
-        return value
-
-    def _ask(self, node: Any, t: int) -> str | None:
-        if self._label is not None:
-            return self._label
-        if self._fn is not None and self._detection is not None:
-            value = self._fn(self._detection, node, t)
-            if value is not None:
-                return value
-        fallback = self._fallback
-        if fallback is not None:
-            by_detection = getattr(fallback, "label_detection", None)
-            if by_detection is not None and self._detection is not None:
-                value = by_detection(self._detection, self._index, t)
-                if value is not None:
-                    return value
-            return fallback.label(node, t)
-        return None
-
-
-class BackendSummary(NamedTuple):
-    """Counts over the backend's live map objects (see :meth:`ConceptGraphsBackend.summary`)."""
-
-    objects: int  #: live (not merged away, not filtered) objects the backend tracks
-    labelled: int  #: objects whose label comes from a committed predicate
-    unknown: int  #: objects left unknown: nothing commits (``unknown_label`` / ``unknown_class_id``)
-    filtered: int  #: objects ConceptGraphs filtered (marked ``cg_filtered``)
-    detections: int  #: per-detection claims routed
-    events: int  #: evidence entries in the graph
-
-
-class MapBeliefs:
+class MapBeliefs(LabelReader):
     """The belief side of a ConceptGraphs map: which graph node each map object is, the evidence its
     detections routed there, and the label the beliefs give it.
 
@@ -95,7 +40,8 @@ class MapBeliefs:
 
     Args:
         operator: a FusionOperator instance.
-        vocabulary: the :class:`ClassVocabulary` mapping class names to predicates.
+        vocabulary: the :class:`ClassVocabulary` mapping class names to predicates; None: not known
+            yet (:meth:`set_vocabulary` gives it before the first claim, else :meth:`vocabulary_needed`).
         graph: the scene graph the beliefs live in.
         seed_from_graph: the graph may already hold evidence the backend did not route (a graph
             handed in by the caller): a node's pre-existing beliefs are read once, on first use.
@@ -119,7 +65,7 @@ class MapBeliefs:
     def __init__(
         self,
         operator: Any,
-        vocabulary: ClassVocabulary,
+        vocabulary: ClassVocabulary | None,
         graph: Any,
         *,
         seed_from_graph: bool = False,
@@ -138,9 +84,16 @@ class MapBeliefs:
         from sgbelief.fusion.channel import NullChannel
         from sgbelief.fusion.operators.base import BaseOperator
 
-        self.vocabulary = vocabulary
-        self.table = vocabulary.table()
         self.operator = operator
+        #: the operator's own vocabulary is the backend's (set again whenever the vocabulary is)
+        self._share_table = getattr(operator, "vocabulary", None) is None
+        self.vocabulary: ClassVocabulary | None = None
+        self.table: Any = None
+        #: resolves, counts and checks the geometric labels (channel_labels.LabelResolver)
+        self.labels = LabelResolver(None)
+        self._predicate_cache: dict[str, str | None] = {}
+        if vocabulary is not None:
+            self.set_vocabulary(vocabulary)
         cfg = getattr(operator, "config", None)
         self.tau = float(tau if tau is not None else getattr(cfg, "tau", 0.5))
         self.tau_t = float(tau_t if tau_t is not None else getattr(cfg, "tau_t", 0.1))
@@ -172,8 +125,14 @@ class MapBeliefs:
         self._preds_per_node: dict[Any, set[str]] = {}
         #: predicates only the geometric labels asserted at each node (candidates when no claimed one commits)
         self._label_preds_per_node: dict[Any, set[str]] = {}
-        self._predicate_cache: dict[str, str | None] = {}
+        #: the (resolved) labels the channel gave at each node, counted: a merged predicate writes
+        #: the channel's own name (table, not desk, for is_table_or_desk)
+        self._labels_per_node: dict[Any, Counter[str]] = {}
         self._seeded: set[Any] = set()
+        #: per detector class name: claims and what the channel said of them (summary())
+        self._claim_counts: dict[str, ClaimCounts] = {}
+        #: a channel is configured (or a detection carried its own label): checked within 20 frames
+        self._has_channel = self.channel is not None or self.channel_fn is not None
         self._detections_per_node: Counter[Any] = Counter()
         self._routed_detections = 0
         self._last_t = None
@@ -182,6 +141,8 @@ class MapBeliefs:
         self._changed: set[Any] = set()
         self.reports: list[Any] = []
         self.keep_reports = False
+        #: when a list: every routed (event, {node: label}) is appended (benchmarks replay them)
+        self.event_log: list[tuple[Any, dict[Any, str]]] | None = None
         self.active = True
         if isinstance(label_rule, str):
             if label_rule not in ("most_frequent", "first"):
@@ -192,32 +153,55 @@ class MapBeliefs:
         # sgbelief's own operators take report=False (no per-target reports nobody reads); any other
         # FusionOperator gets the protocol's update(graph, event, channel)
         self._skip_reports = isinstance(operator, BaseOperator)
+        #: routed events waiting for flush(): (event, channel, class name)
+        self._pending: list[tuple[Any, Any, str]] = []
+        self._pending_dicts: set[int] = set()
+        self._batch_open = False
+        #: ids of the dicts whose geometry was read when their node was added, since the last
+        #: per-frame sync (their geometry is current unless merged into since: see sync_labels)
+        self.fresh_geometry: set[int] = set()
+
+    @property
+    def _batched(self) -> bool:
+        """Events are queued and applied per frame: inside :meth:`batch`, with sgbelief's operators
+        and no per-event reports kept. Elsewhere each routed detection is applied at once."""
+        return self._batch_open and self._skip_reports and not self.keep_reports
+
+    @contextlib.contextmanager
+    def batch(self) -> Iterator[None]:
+        """Queue the events routed inside (a per-frame merge) and apply them in one ``update_many``
+        call at the latest when it ends (:meth:`flush`)."""
+        if self._batch_open:
+            yield
+            return
+        self._batch_open = True
+        try:
+            yield
+        finally:
+            self._batch_open = False
+        self.flush()
+
+    # ------------------------------------------------------------------ vocabulary
+    def set_vocabulary(self, vocabulary: ClassVocabulary) -> None:
+        """Use ``vocabulary`` from now on (its table also becomes the operator's, when the operator
+        had none of its own). Claims already routed keep the predicates they were given."""
+        self.vocabulary = vocabulary
+        self.table = vocabulary.table()
+        if self._share_table:
+            self.operator.vocabulary = self.table
+        self.labels.set_table(self.table)
+        self._predicate_cache.clear()
+
+    def vocabulary_needed(self, class_name: str) -> ClassVocabulary:
+        """Called when a claim arrives before any vocabulary was given; returns the one to use.
+        :class:`~sgbelief.adapters.conceptgraphs.backend.ConceptGraphsBackend` derives it from the
+        class names; here it is an error."""
+        raise ValueError(f"claim of class {class_name!r} routed before the backend has a vocabulary")
 
     # ------------------------------------------------------------------ reading CG dicts
     def claims_of(self, obj: Mapping[str, Any]) -> list[Claim]:
         """The per-detection (class, confidence, frame) history stored in a CG object dict."""
-        ids, confs, frames = _seq(obj.get("class_id")), _seq(obj.get("conf")), _seq(obj.get("image_idx"))
-        names = obj.get("class_name")
-        n = max(len(ids), len(confs))
-        out: list[Claim] = []
-        for k in range(n):
-            cid = _as_int(ids[k]) if k < len(ids) else None
-            if isinstance(names, list) and k < len(names):
-                name = str(names[k])
-            elif cid is not None and cid in self.class_names:
-                name = self.class_names[cid]
-            elif isinstance(names, str) and (n == 1 or not ids):
-                name = names
-            elif cid is not None:
-                name = str(cid)
-            else:
-                continue
-            if cid is not None and cid >= 0 and name != str(cid):
-                self.class_names.setdefault(cid, name)
-            conf = _as_float(confs[k]) if k < len(confs) and confs[k] is not None else 1.0
-            t = _as_int(frames[k]) if k < len(frames) else 0
-            out.append(Claim(cid, name, min(max(conf, 0.0), 1.0), t if t is not None else 0))
-        return out
+        return read_claims(obj, self.class_names)
 
     # ------------------------------------------------------------------ identity
     def node_of(self, obj: Mapping[str, Any]) -> Any | None:
@@ -245,6 +229,7 @@ class MapBeliefs:
             return
         centroid, bbox = geometry_summary(obj)
         self.graph.add_node(node, centroid=centroid, bbox=bbox, source="conceptgraphs")
+        self.fresh_geometry.add(id(obj))
 
     # ------------------------------------------------------------------ evidence
     def route_detection(self, det: dict, targets: Mapping[Any, float]) -> int:
@@ -252,61 +237,133 @@ class MapBeliefs:
 
         Returns the number of events emitted.  Targets with mass <= tau_T are discarded; the
         detection's own geometric label (``label_key``) is consumed and removed from the dict.
+        The events are queued and applied in one ``update_many`` call by :meth:`flush` (at the end
+        of the per-frame merge, and before anything reads or merges the beliefs), in the order they
+        were routed: the map is the one event-by-event updates give.
         """
-        from sgbelief.fusion.events import EvidenceEvent
-
         geo = det.pop(self.label_key, None) if isinstance(det, dict) else None
-        targets = {n: float(m) for n, m in targets.items() if float(m) > self.tau_t}
+        tau_t = self.tau_t
+        targets = {n: float(m) for n, m in targets.items() if float(m) > tau_t}
         claims = self.claims_of(det)
+        geo_labels = geo if isinstance(geo, list) else None
+        names_per_node = self._names_per_node
+        preds_per_node = self._preds_per_node
+        pending = self._pending
+        table = self.table
+        context = self.context
         n_events = 0
-        geo_labels = geo if isinstance(geo, list) else [geo] * len(claims)
         for k, claim in enumerate(claims):
-            pred = self._predicate(claim.class_name)
+            name = claim.class_name
+            pred = self._predicate(name)
+            key = (claim.class_id, name)
             for node in targets:
-                counts = self._names_per_node.get(node)
+                counts = names_per_node.get(node)
                 if counts is None:
-                    counts = self._names_per_node[node] = Counter()
-                counts[(claim.class_id, claim.class_name)] += 1
+                    counts = names_per_node[node] = Counter()
+                counts[key] += 1
                 if pred is not None:
-                    preds = self._preds_per_node.get(node)
+                    preds = preds_per_node.get(node)
                     if preds is None:
-                        self._preds_per_node[node] = {pred}
+                        preds_per_node[node] = {pred}
                     else:
                         preds.add(pred)
             if pred is None or not targets:
                 continue
-            conf = self.confidence_map(claim.confidence) if self.confidence_map else claim.confidence
-            label = geo_labels[k] if k < len(geo_labels) else None
-            if self.table is not None and pred not in self.table:
+            conf = claim.confidence
+            if self.confidence_map is not None:
+                conf = _checked_confidence(self.confidence_map(conf))
+            label = geo if geo_labels is None else (geo_labels[k] if k < len(geo_labels) else None)
+            if label is not None:
+                self._has_channel = True
+            if table is not None and pred not in table:
                 channel: Any = self._null  # no verification possible for this predicate
             else:
-                channel = _EventChannel(label, det, self.channel, self.channel_fn, k)
-            if self._last_t is not None and claim.t > self._last_t:
-                resolved = self.operator.tick(self.graph, claim.t)
-                if resolved:
-                    self._note_resolutions(resolved)
-            self._last_t = claim.t if self._last_t is None else max(self._last_t, claim.t)
-            event = EvidenceEvent(targets=targets, predicate=pred, confidence=float(conf),
-                                  context=self.context, t=int(claim.t))
-            if self._skip_reports and not self.keep_reports:
-                report = self.operator.update(self.graph, event, channel, report=False)
-            else:
-                report = self.operator.update(self.graph, event, channel)
-            if report.resolutions:
-                self._note_resolutions(report.resolutions)
-            if channel is not self._null and channel.answers:
-                # comod observes what the geometric label asserts (geometric_evidence: label): a
-                # label is a candidate class of its node even when no detection named it
-                self._note_label_predicates(channel.answers)
-            if self.keep_reports:
-                self.reports.append(report)
+                channel = EventChannel(label, det, self.channel, self.channel_fn, k, self.labels.resolve)
+            if claim.t < 0:
+                raise InvalidEventError("t", f"must be a non-negative integer time step, got {claim.t!r}")
+            if not 0.0 <= conf <= 1.0:  # NaN
+                raise InvalidEventError("confidence", f"must be finite and in [0, 1], got {conf!r}")
+            # the event is built from checked parts (targets above tau_T, masses from a normalised
+            # row, a clipped confidence): no re-validation per claim
+            pending.append((EvidenceEvent.trusted(targets, pred, conf, context, claim.t, next_event_id()),
+                            channel, name))
             n_events += 1
+        if n_events:
+            self._pending_dicts.add(id(det))
         changed = self._changed
         for node in targets:
             self._detections_per_node[node] += len(claims)
             changed.add(node)
         self._routed_detections += len(claims)
+        if not self._batched:
+            self.flush()
         return n_events
+
+    def flush(self) -> None:
+        """Apply the queued events (one ``update_many`` call), then note what each did: queue
+        resolutions, the labels the channel gave, the per-class counts of :meth:`summary`."""
+        pending = self._pending
+        if not pending:
+            return
+        self._pending = []
+        self._pending_dicts.clear()
+        self._apply(pending)
+        null, log, has_channel = self._null, self.event_log, self._has_channel
+        for event, channel, name in pending:
+            answers = None if channel is null else channel.answers
+            self._count_claim(name, event.predicate, event.confidence, answers)
+            if answers:
+                # comod observes what the geometric label asserts (geometric_evidence: label): a
+                # label is a candidate class of its node even when no detection named it
+                self._note_label_predicates(answers)
+            if log is not None:
+                log.append((event, dict(answers) if answers else {}))
+            if has_channel and channel is not null and channel.asked:
+                self.labels.note_frame(event.t)
+
+    def _apply(self, pending: list[tuple[Any, Any, str]]) -> None:
+        """The operator's update of the queued (event, channel) pairs, in order."""
+        op, graph = self.operator, self.graph
+        if self._batched:
+            resolutions = op.update_many(graph, [(event, channel) for event, channel, _ in pending])
+            if resolutions:
+                self._note_resolutions(resolutions)
+        else:
+            for event, channel, _name in pending:
+                if not self._skip_reports and self._last_t is not None and event.t > self._last_t:
+                    resolved = op.tick(graph, event.t)
+                    if resolved:
+                        self._note_resolutions(resolved)
+                self._last_t = event.t if self._last_t is None else max(self._last_t, event.t)
+                report = op.update(graph, event, channel) if self.keep_reports or not self._skip_reports \
+                    else op.update(graph, event, channel, report=False)
+                if report.resolutions:
+                    self._note_resolutions(report.resolutions)
+                if self.keep_reports:
+                    self.reports.append(report)
+
+    def pending_dict(self, obj: Any) -> bool:
+        """Whether a queued event still reads ``obj`` (a detection / object dict): the caller
+        flushes before changing it."""
+        return id(obj) in self._pending_dicts
+
+    def _count_claim(self, class_name: str, pred: str, conf: float, answers: Mapping[Any, str] | None) -> None:
+        """Count one routed claim for :meth:`summary`: verified, refused or unverifiable, by the
+        verdict of the first label the channel gave for it (and the claim's raw sign)."""
+        counts = self._claim_counts.get(class_name)
+        if counts is None:
+            counts = self._claim_counts[class_name] = ClaimCounts()
+        counts.claims += 1
+        if not answers:
+            counts.unverifiable += 1
+            return
+        y = self.table.outcome(pred, next(iter(answers.values()))) if self.table is not None else None
+        if y is None:
+            counts.unverifiable += 1
+        elif (y == 1) == (conf >= 0.5):
+            counts.verified += 1
+        else:
+            counts.refused += 1
 
     def _note_label_predicates(self, answers: Mapping[Any, str]) -> None:
         """Note the predicates each answered label asserts as its node's geometric candidates."""
@@ -319,8 +376,10 @@ class MapBeliefs:
                 preds = self._label_preds_per_node.get(node)
                 if preds is None:
                     self._label_preds_per_node[node] = set(asserted)
+                    self._labels_per_node[node] = Counter((label,))
                 else:
                     preds.update(asserted)
+                    self._labels_per_node[node][label] += 1
 
     def _note_resolutions(self, resolutions: Iterable[Any]) -> None:
         """A queued event left its queue (released, corroborated, ...): its node's beliefs may move."""
@@ -332,24 +391,29 @@ class MapBeliefs:
         """Nodes whose beliefs may have changed since the previous call (then forgotten): targets of
         routed events, nodes that absorbed a merge, nodes of queue resolutions. The per-frame merges
         relabel exactly these, so a frame's label work follows its detections, not the map's size."""
+        self.flush()
         changed, self._changed = self._changed, set()
         return changed
 
     def targets_for(self, row: Any, best: int, objects: Sequence[dict], threshold: float,
-                    touched: set[int] | None = None) -> dict[Any, float]:
+                    touched: set[int] | None = None, candidates: Sequence[int] | None = None) -> dict[Any, float]:
         """Targeting distribution T for one detection from its row of association scores.
 
         Every object whose score is above ``threshold`` (finite scores when it is -inf) is a
         candidate; T(v) is proportional to max(score, 0) over the candidates, and the argmax
         alone gets mass 1 when no candidate has a positive score.  The caller drops T(v) <= tau_T.
-        ``touched``: the list positions of the targeted objects are added to it.
+        ``touched``: the list positions of the targeted objects are added to it. ``candidates``:
+        the positions of the positive candidates when the caller found them for the whole frame.
         """
-        scores = np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float).ravel()
-        n = min(len(scores), len(objects))
-        s = scores[:n]
-        # candidates found in numpy: the per-detection cost does not grow with the map's size
-        cand = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0)).tolist()
-        pos = {j: float(s[j]) for j in cand}
+        scores = row if type(row) is np.ndarray and row.dtype == np.float64 else \
+            np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float)
+        scores = scores.ravel()
+        if candidates is None:
+            n = min(len(scores), len(objects))
+            s = scores[:n]
+            # candidates found in numpy: the per-detection cost does not grow with the map's size
+            candidates = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0)).tolist()
+        pos = {j: float(scores[j]) for j in candidates}
         if len(pos) <= 1 or best not in pos:
             if touched is not None:
                 touched.add(best)
@@ -365,6 +429,7 @@ class MapBeliefs:
 
     def migrate(self, keep_obj: dict, absorb_obj: dict) -> None:
         """``absorb_obj`` (a map object or a fresh detection) is being merged into ``keep_obj``."""
+        self.flush()
         keep = self.ensure_node(keep_obj)
         raw = self.identity.lookup(absorb_obj)
         if raw is None:
@@ -387,6 +452,7 @@ class MapBeliefs:
         names.update(self._names_per_node.pop(raw, Counter()))
         self._preds_per_node.setdefault(keep, set()).update(self._preds_per_node.pop(raw, ()))
         self._label_preds_per_node.setdefault(keep, set()).update(self._label_preds_per_node.pop(raw, ()))
+        self._labels_per_node.setdefault(keep, Counter()).update(self._labels_per_node.pop(raw, Counter()))
         self.identity.absorb(raw, keep)
         self._changed.add(keep)
 
@@ -403,6 +469,7 @@ class MapBeliefs:
             attrs["bbox"] = bbox
 
     def mark_filtered(self, obj: Mapping[str, Any]) -> None:
+        self.flush()
         node = self.node_of(obj)
         if node is None or node not in self.graph:
             return
@@ -410,30 +477,23 @@ class MapBeliefs:
             self.graph.remove_node(node)
             self._preds_per_node.pop(node, None)
             self._label_preds_per_node.pop(node, None)
+            self._labels_per_node.pop(node, None)
         else:
             self.graph.nx.nodes[node]["cg_filtered"] = True
         self.identity.retire(node)
 
     # ------------------------------------------------------------------ labels out
-    def beliefs(self, obj: Mapping[str, Any]) -> dict[str, Any]:
-        """{predicate: BetaBelief} of a map object (empty for an object the backend never saw)."""
-        node = self.node_of(obj)
-        if node is None or node not in self.graph:
-            return {}
-        return dict(self.graph.beliefs(node))
-
-    def probability(self, obj: Mapping[str, Any], predicate: str) -> float:
-        node = self.node_of(obj)
-        if node is None or node not in self.graph:
-            return 0.5
-        return float(self.operator.probability(self.graph, node, predicate))
-
     def _predicate(self, class_name: str) -> str | None:
         """``vocabulary.predicate`` memoised per class name (called for every claim and label read)."""
         try:
             return self._predicate_cache[class_name]
         except KeyError:
-            pred = self._predicate_cache[class_name] = self.vocabulary.predicate(class_name)
+            vocab = self.vocabulary
+            if vocab is None or getattr(self, "_growing", False):
+                vocab = self.vocabulary_needed(class_name)
+                if vocab is not self.vocabulary:
+                    self.set_vocabulary(vocab)
+            pred = self._predicate_cache[class_name] = vocab.predicate(class_name)
             return pred
 
     def _predicates_of(self, node: Any) -> set[str]:
@@ -449,115 +509,16 @@ class MapBeliefs:
                 preds.update(self.graph.beliefs(node))
         return preds
 
-    def committed_predicate(self, node: Any) -> str | None:
-        """The predicate with the highest committed probability (> tau), or None.
-
-        The candidates are the predicates the node's detections claimed. Only when none of them
-        commits are the predicates that the geometric labels alone asserted considered (comod,
-        ``geometric_evidence: label``): a sofa the detector always calls ``tv`` is labelled
-        ``sofa``, while one stray label of a segmenter does not outrank a class the detector
-        keeps naming and the geometry keeps confirming. Under independent Beta(1, 1) beliefs, a
-        single observation (mean 2/3) would otherwise outrank a well-supported class with a few
-        contradictions. The probability is the operator's (``FusionOperator.probability``), for
-        every operator."""
-        best = self._best_committed(sorted(self._predicates_of(node)), node)
-        if best is None:
-            extra = self._label_preds_per_node.get(node)
-            if extra:
-                best = self._best_committed(sorted(extra), node)
-        return best
-
-    def _best_committed(self, preds: Iterable[str], node: Any) -> str | None:
-        best, best_p = None, self.tau
-        probability = self.operator.probability
-        graph = self.graph
-        for pred in preds:
-            p = float(probability(graph, node, pred))
-            if p > best_p:
-                best, best_p = pred, p
-        return best
-
-    def _class_for(self, node: Any, pred: str | None) -> tuple[int | None, str] | None:
-        if pred is None:
-            return None
-        counts = self._names_per_node.get(node)
-        if not counts:
-            return None
-        predicate = self._predicate
-        rule = self.label_rule
-        if rule == "first":
-            for key in counts:  # Counter keeps first-seen order
-                if predicate(key[1]) == pred:
-                    return key
-            return self._class_named_by(pred)
-        if not isinstance(rule, str) and pred in rule:
-            name = rule[pred]
-            for key in counts:
-                if key[1] == name:
-                    return key
-            cid = next((i for i, n in self.class_names.items() if n == name), None)
-            return (cid, name)
-        best, best_n = None, 0
-        for key, n in counts.items():  # most frequent; ties keep first-seen order
-            if n > best_n and predicate(key[1]) == pred:
-                best, best_n = key, n
-        return best if best is not None else self._class_named_by(pred)
-
-    def _class_named_by(self, pred: str) -> tuple[int | None, str] | None:
-        """(class id, name) for a predicate no detection of the node named (the geometric labels
-        committed it): the first class of the class list whose predicate it is."""
-        predicate = self._predicate
-        for cid, name in sorted(self.class_names.items()):
-            if predicate(name) == pred:
-                return (cid, name)
-        return None
-
-    def committed_class(self, node: Any) -> tuple[int | None, str] | None:
-        """(class id, class name) of the node's committed predicate under ``label_rule``, or None
-        when nothing commits."""
-        return self._class_for(node, self.committed_predicate(node))
-
-    def label_of(self, obj: Mapping[str, Any]) -> str | None:
-        """Class name from the beliefs (``unknown_label`` when nothing commits; None if unseen)."""
-        node = self.node_of(obj)
-        if node is None or node not in self.graph:
-            return None
-        hit = self.committed_class(node)
-        return self.unknown_label if hit is None else hit[1]
-
-    def class_id_of(self, obj: Mapping[str, Any]) -> int | None:
-        """Class id from the beliefs (``unknown_class_id`` when nothing commits; None if unseen)."""
-        node = self.node_of(obj)
-        if node is None or node not in self.graph:
-            return None
-        hit = self.committed_class(node)
-        if hit is None or hit[0] is None:
-            return self.unknown_class_id
-        return hit[0]
-
     # ------------------------------------------------------------------ per frame
     def end_frame(self) -> None:
         """Called by the patched per-frame merge functions once per frame (after the merge).
 
-        Nothing to do for the bookkeeping itself; :class:`~sgbelief.adapters.conceptgraphs.backend.
+        Applies the frame's queued events; :class:`~sgbelief.adapters.conceptgraphs.backend.
         ConceptGraphsBackend` adds its garbage-collector checkpoints here."""
-
-    def summary(self, objects: Sequence[Mapping[str, Any]] | None = None) -> BackendSummary:
-        """Counts of labelled and ``unknown`` objects (nothing commits), over ``objects`` (a map
-        object list) or every live node the backend tracks."""
-        if objects is not None:
-            nodes = [n for n in (self.node_of(o) for o in objects) if n is not None and n in self.graph]
-        else:
-            nodes = [n for n in self.graph.nodes() if n in self._names_per_node]
-        attrs = self.graph.nx.nodes
-        filtered = sum(1 for n in nodes if attrs[n].get("cg_filtered"))
-        live = [n for n in nodes if not attrs[n].get("cg_filtered")]
-        labelled = sum(1 for n in live if self.committed_class(n) is not None)
-        return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
-                              filtered=filtered, detections=self._routed_detections,
-                              events=self.evidence_count())
+        self.flush()
 
     def evidence_count(self) -> int:
+        self.flush()
         return int(self.graph.evidence_count())
 
     @property
@@ -566,25 +527,9 @@ class MapBeliefs:
         return self._routed_detections
 
 
-def _seq(value: Any) -> list[Any]:
-    """A per-detection field as a list (None -> []; numpy arrays have no truth value)."""
-    if value is None:
-        return []
-    if isinstance(value, list):
-        return value
-    return list(value)
-
-
-def _as_int(value: Any) -> int | None:
-    if type(value) is int:
-        return value
-    try:
-        return int(np.asarray(value).item())
-    except (TypeError, ValueError):
-        return None
-
-
-def _as_float(value: Any) -> float:
-    if type(value) is float:
-        return value
-    return float(np.asarray(value).item())
+def _checked_confidence(value: Any) -> float:
+    """A ``confidence_map`` result as an event confidence: a finite number in [0, 1]."""
+    c = float(value)
+    if not 0.0 <= c <= 1.0:  # also rejects NaN
+        raise InvalidEventError("confidence", f"confidence_map gave {value!r}: must be finite and in [0, 1]")
+    return c

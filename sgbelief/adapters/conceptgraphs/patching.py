@@ -1,8 +1,17 @@
-"""The installer: capture ConceptGraphs' functions from its already-imported modules, build the
-generation's replacements with those originals passed in, swap them in, and back."""
+"""The installer: capture ConceptGraphs' functions from its imported modules, build the
+generation's replacements with those originals passed in, swap them in, and back.
+
+ConceptGraphs' modules are imported when the run script has not imported them yet; when they cannot
+be imported, :meth:`Patcher.install` raises :class:`ConceptGraphsNotFoundError` naming what is missing
+(the backend is never active with nothing patched). The functions through which a run loads or
+passes its class list (``create_or_load_colors``, ``gobs_to_detection_list`` on ``main``;
+``ObjectClasses``, ``make_detection_list_from_pcd_and_gobs`` on ``ali-dev``) are wrapped so the
+backend learns the class list the run uses (its default vocabulary)."""
 
 from __future__ import annotations
 
+import functools
+import importlib
 import inspect
 import sys
 from collections.abc import Callable
@@ -31,6 +40,18 @@ HELPERS: dict[str, str] = {
     "tracker": "conceptgraph.slam.mapping",
 }
 CORE_MODULES = ("conceptgraph.slam.utils", "conceptgraph.slam.mapping", "conceptgraph.slam.slam_classes")
+#: functions through which a run loads or passes its class list (wrapped, never replaced), by module
+CLASS_LIST_FUNCTIONS: dict[str, str] = {
+    "create_or_load_colors": "conceptgraph.slam.utils",  # main: returns (classes, colours)
+    "gobs_to_detection_list": "conceptgraph.slam.utils",  # main: class_names=, BG_CLASSES=
+    "make_detection_list_from_pcd_and_gobs": "conceptgraph.slam.utils",  # ali-dev: obj_classes
+}
+#: ali-dev's class-list holder (its constructor reads the classes file)
+CLASS_LIST_CLASS = ("ObjectClasses", "conceptgraph.utils.general_utils")
+
+
+class ConceptGraphsNotFoundError(ImportError):
+    """ConceptGraphs' mapping modules cannot be found or imported: nothing could be patched."""
 
 
 def _kwarg_tolerant(cls: type) -> type:
@@ -96,7 +117,25 @@ class Patcher:
     def helper(self, name: str) -> Any:
         return self._helpers.get(name)
 
+    def _require_modules(self) -> None:
+        """Import ConceptGraphs' core modules the run script has not imported yet; raise naming the
+        ones that can be neither found nor imported."""
+        missing: list[str] = []
+        for modname in CORE_MODULES:
+            if self._module(modname) is not None:
+                continue
+            try:
+                importlib.import_module(modname)
+            except ImportError as exc:
+                missing.append(f"{modname} ({type(exc).__name__}: {exc})")
+        if missing:
+            raise ConceptGraphsNotFoundError(
+                "ConceptGraphs' mapping modules cannot be imported, so nothing would be patched: "
+                + "; ".join(missing) + ". Install concept-graphs (or put its checkout on sys.path) and call "
+                "backend.install() after the run script's own imports")
+
     def install(self) -> None:
+        self._require_modules()
         for name, modname in PATCHED_NAMES.items():
             mod = self._module(modname)
             value = getattr(mod, name, None) if mod is not None else None
@@ -111,10 +150,20 @@ class Patcher:
             mod = self._module(modname)
             if mod is not None and name in mod.__dict__:
                 self._helpers[name] = mod.__dict__[name]
+        if not self.originals:
+            raise ConceptGraphsNotFoundError(
+                "none of ConceptGraphs' mapping functions (" + ", ".join(PATCHED_NAMES) + ") was found in "
+                + ", ".join(CORE_MODULES) + ": nothing would be patched")
         if self.generation is None:
             self.generation = self._detect_generation()
         funcs = self.functions = make_functions(self.backend, self.generation, self.originals, self._helpers)
         replacements = funcs.replacements()
+        for name, modname in CLASS_LIST_FUNCTIONS.items():  # class-list sources: wrapped
+            mod = self._module(modname)
+            value = getattr(mod, name, None) if mod is not None else None
+            if callable(value) and not getattr(value, "_sgbelief_replacement", False):
+                self.originals[name] = value
+                replacements[name] = _class_list_wrapper(name, value, self.backend)
         # every namespace that bound an original (conceptgraph.* modules, run scripts, __main__)
         targets = list(self.extra)
         for modname, mod in list(sys.modules.items()):
@@ -132,6 +181,11 @@ class Patcher:
                 old = d.get(name)
                 if old is not None and (old is self.originals.get(name)):
                     self._set(mod, name, new)
+        holder_name, holder_mod = CLASS_LIST_CLASS
+        mod = self._module(holder_mod) or sys.modules.get(holder_mod)
+        holder = getattr(mod, holder_name, None) if mod is not None else None
+        if isinstance(holder, type) and not getattr(holder.__init__, "_sgbelief_replacement", False):
+            self._set(holder, "__init__", _class_holder_init(holder.__init__, self.backend))
         # labels out: DetectionList.get_most_common_class (MapObjectList inherits it)
         classes = self._list_classes(targets)
         for cls in classes.get("DetectionList", []):
@@ -183,6 +237,63 @@ class Patcher:
                     pass
         self.originals.clear()
         self._helpers.clear()
+
+
+def _learn(backend: Any, classes: Any, background: Any, source: str) -> None:
+    learn = getattr(backend, "learn_class_list", None)
+    if learn is None or classes is None or isinstance(classes, (str, bytes)):
+        return
+    try:
+        names = [str(c) for c in classes]
+    except TypeError:
+        return
+    learn(names, background=[str(b) for b in background or ()], source=source)
+
+
+def _class_list_wrapper(name: str, original: Callable[..., Any], backend: Any) -> Callable[..., Any]:
+    """``original`` unchanged, except that the class list it loads or receives is handed to the
+    backend (until the backend has one: afterwards one attribute read per call)."""
+    try:
+        sig: inspect.Signature | None = inspect.signature(original)
+    except (TypeError, ValueError):
+        sig = None
+
+    @functools.wraps(original)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        out = original(*args, **kwargs)
+        if not backend.class_list_known:
+            try:
+                if name == "create_or_load_colors":
+                    _learn(backend, out[0] if isinstance(out, tuple) else None, (), name)
+                elif sig is not None:
+                    bound = sig.bind_partial(*args, **kwargs).arguments
+                    if name == "gobs_to_detection_list":
+                        _learn(backend, bound.get("class_names"), bound.get("BG_CLASSES"), name)
+                    else:
+                        holder = bound.get("obj_classes")
+                        if holder is not None and hasattr(holder, "get_classes_arr"):
+                            bg = holder.get_bg_classes_arr() if hasattr(holder, "get_bg_classes_arr") else ()
+                            _learn(backend, holder.get_classes_arr(), bg, name)
+            except TypeError:
+                pass
+        return out
+
+    wrapper._sgbelief_replacement = True  # type: ignore[attr-defined]
+    return wrapper
+
+
+def _class_holder_init(original: Callable[..., Any], backend: Any) -> Callable[..., Any]:
+    """``ObjectClasses.__init__``, then the class list it read handed to the backend."""
+
+    @functools.wraps(original)
+    def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
+        original(self, *args, **kwargs)
+        if not backend.class_list_known and hasattr(self, "get_classes_arr"):
+            bg = self.get_bg_classes_arr() if hasattr(self, "get_bg_classes_arr") else ()
+            _learn(backend, self.get_classes_arr(), bg, "ObjectClasses")
+
+    __init__._sgbelief_replacement = True  # type: ignore[attr-defined]
+    return __init__
 
 
 def _rejects_kwargs(cls: type) -> bool:

@@ -1,4 +1,10 @@
-"""ConceptGraphs class names -> sgbelief predicates (sgbelief/configs/conceptgraphs/*.yaml)."""
+"""ConceptGraphs class names -> sgbelief predicates.
+
+The ConceptGraphs backend's default is :meth:`ClassVocabulary.open_vocabulary` over the class list
+ConceptGraphs runs with: every class its own, mutually exclusive predicate, names of one synonym
+set (couch / sofa) one predicate. The closed, hand-written tables of
+``sgbelief/configs/conceptgraphs/*.yaml`` are available by name (``"scannet"``).
+"""
 
 from __future__ import annotations
 
@@ -10,6 +16,7 @@ from typing import Any
 import yaml
 
 from sgbelief.errors import ConfigError
+from sgbelief.fusion.compatibility import singular_name
 
 _NON_WORD = re.compile(r"[^0-9a-z]+")
 
@@ -34,15 +41,22 @@ class ClassVocabulary:
         ignore: Iterable[str] = (),
         subsumption_path: Path | None = None,
         table: Any = None,
+        name: str | None = None,
+        class_names: Iterable[str] | None = None,
     ) -> None:
         self._map: dict[str, str] = {}
-        for name, pred in (aliases or {}).items():
-            self._map[normalise_class_name(name)] = pred
-        for name, pred in (classes or {}).items():
-            self._map[normalise_class_name(name)] = pred
+        for alias, pred in (aliases or {}).items():
+            self._map[normalise_class_name(alias)] = pred
+        for cname, pred in (classes or {}).items():
+            self._map[normalise_class_name(cname)] = pred
         self._ignore = {normalise_class_name(n) for n in ignore}
         self.subsumption_path = subsumption_path
         self._table = table
+        #: the vocabulary's name (its class list's, or the table file's stem)
+        self.name = name or (getattr(table, "name", None) if table is not None else None) or \
+            (subsumption_path.stem if subsumption_path is not None else "vocabulary")
+        #: the detector class list an open vocabulary was derived from (None for a closed table)
+        self.class_names: tuple[str, ...] | None = tuple(class_names) if class_names is not None else None
 
     # ---- construction -------------------------------------------------------------------
     @classmethod
@@ -64,7 +78,7 @@ class ClassVocabulary:
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: top level must be a mapping")
         if data.get("format") == "sgbelief.vocabulary":  # a subsumption table used directly
-            return cls(aliases=_aliases_of(data, path), subsumption_path=path)
+            return cls(aliases=_aliases_of(data, path), subsumption_path=path, name=path.stem)
         if data.get("format") == "sgbelief.label_mapping":
             raise ConfigError(f"{path}: key 'format': a label mapping is not a class vocabulary; pass it as "
                               "mapping= (or the 'mapping' key of a sgbelief.cg_vocabulary file)")
@@ -77,7 +91,8 @@ class ClassVocabulary:
         if not isinstance(ignore, list):
             raise ConfigError(f"{path}: key 'ignore': expected a list of class names")
         if data.get("class_list") is not None:  # open vocabulary: derive the table
-            unknown = sorted(set(data) - {"format", "version", "class_list", "taxonomy", "mapping", "classes", "ignore"})
+            unknown = sorted(set(data) - {"format", "version", "class_list", "taxonomy", "mapping", "classes", "ignore",
+                                          "merge"})
             if unknown:
                 raise ConfigError(f"{path}: key {unknown[0]!r}: not allowed with 'class_list'")
             if data.get("subsumption") is not None:
@@ -90,10 +105,13 @@ class ClassVocabulary:
                 cand = path.parent / value
                 return cand if cand.exists() else value
 
+            merge = data.get("merge", False)
+            if not (isinstance(merge, bool) or (isinstance(merge, list) and all(isinstance(m, str) for m in merge))):
+                raise ConfigError(f"{path}: key 'merge': expected true, false or a list of group predicates")
             try:
                 return cls.open_vocabulary(local("class_list"), taxonomy=local("taxonomy") or "indoor",
-                                           mapping=local("mapping"), ignore=ignore, classes=classes)
-            except FileNotFoundError as exc:
+                                           mapping=local("mapping"), ignore=ignore, classes=classes, merge=merge)
+            except (FileNotFoundError, ValueError) as exc:
                 raise ConfigError(f"{path}: {exc}") from exc
         aliases: dict[str, str] = {}
         sub_path: Path | None = None
@@ -107,25 +125,35 @@ class ClassVocabulary:
                 raise ConfigError(f"{path}: key 'subsumption': file {str(sub)!r} not found")
             sub_data = yaml.safe_load(sub_path.read_text()) or {}
             aliases = _aliases_of(sub_data, sub_path)
-        return cls(classes, aliases=aliases, ignore=ignore, subsumption_path=sub_path)
+        return cls(classes, aliases=aliases, ignore=ignore, subsumption_path=sub_path, name=path.stem)
 
     @classmethod
     def open_vocabulary(cls, class_list: Any, *, taxonomy: Any = "indoor", mapping: Any = None,
                         ignore: Iterable[str] = ("wall", "floor", "ceiling"),
-                        classes: Mapping[str, str] | None = None) -> ClassVocabulary:
+                        classes: Mapping[str, str] | None = None,
+                        merge: bool | Iterable[str] = False) -> ClassVocabulary:
         """A vocabulary derived from a detector class list (a path, a shipped name such as
-        ``scannet200`` / ``coco80``, or a list of names), a taxonomy and an optional mapping into the
-        geometric channel's labels (e.g. ``scannet200_nyu40``). See :mod:`sgbelief.fusion.open_vocab`."""
-        from sgbelief.fusion.open_vocab import derive_table
+        ``scannet200`` / ``coco80`` / ``replica``, or a list of names), a taxonomy and an optional
+        mapping into the geometric channel's labels (e.g. ``scannet200_nyu40``).
+
+        Classes listed separately are separate, mutually exclusive predicates; the taxonomy merges
+        only names of one synonym set (couch / sofa). ``merge`` also merges the taxonomy's groups of
+        kinds: True for all, or the group predicates (``["is_table_or_desk"]``: table, desk, ...).
+        See :mod:`sgbelief.fusion.open_vocab`."""
+        from sgbelief.fusion.open_vocab import derive_table, resolve_class_list
 
         ignore = list(ignore)
-        table = derive_table(class_list, taxonomy, mapping, ignore=ignore)
+        class_list = resolve_class_list(class_list)
+        table = derive_table(class_list, taxonomy, mapping, ignore=ignore, merge=merge)
         aliases = {alias: pred for pred, spec in table.specs.items() for alias in spec.aliases}
-        return cls(classes, aliases=aliases, ignore=ignore, table=table)
+        return cls(classes, aliases=aliases, ignore=ignore, table=table, name=class_list.name,
+                   class_names=class_list.names)
 
     @classmethod
     def default(cls) -> ClassVocabulary:
-        """The shipped ScanNet vocabulary (``sgbelief/configs/conceptgraphs/scannet.yaml``)."""
+        """The closed, hand-written ScanNet vocabulary (``sgbelief/configs/conceptgraphs/scannet.yaml``;
+        also ``ConceptGraphsBackend(vocabulary="scannet")``). Not the backend's default, which is
+        the open vocabulary of the class list ConceptGraphs runs with."""
         from sgbelief.resources import config_path
 
         return cls.from_yaml(config_path("conceptgraphs", "scannet.yaml"))
@@ -137,8 +165,8 @@ class ClassVocabulary:
         if key in self._ignore:
             return None
         pred = self._map.get(key)
-        if pred is None and key.endswith("s") and key[:-1] in self._map:  # plural detector prompts
-            pred = self._map[key[:-1]]
+        if pred is None:  # plural detector prompts ("chairs", "shelves")
+            pred = self._map.get(singular_name(key))
         return pred if pred is not None else f"is_{key}"
 
     def known_predicates(self) -> set[str]:

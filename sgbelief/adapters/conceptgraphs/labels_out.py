@@ -1,0 +1,241 @@
+"""Labels out of the beliefs of a ConceptGraphs map: the committed predicate of an object, the class
+written for it, and the summary of what the backend did.
+
+:class:`LabelReader` is the reading half of :class:`~.map_beliefs.MapBeliefs` (which inherits it):
+it reads the per-node bookkeeping the routing half keeps (the class names claimed at a node, the
+predicates routed there, the labels the channel gave there) and the operator's probabilities.
+Every read first applies the evidence still queued (``flush``), so it sees every routed claim.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClassSummary
+from sgbelief.adapters.conceptgraphs.vocab import normalise_class_name
+
+__all__ = ["LabelReader"]
+
+
+class LabelReader:
+    """Committed predicates, written classes and the summary (see the module doc). The attributes
+    it reads are set by :class:`~.map_beliefs.MapBeliefs`."""
+
+    # attributes MapBeliefs provides
+    graph: Any
+    operator: Any
+    tau: float
+    table: Any
+    vocabulary: Any
+    class_names: dict[int, str]
+    label_rule: Any
+    unknown_label: str
+    unknown_class_id: int
+    labels: Any
+    _names_per_node: dict[Any, Counter[tuple[int | None, str]]]
+    _label_preds_per_node: dict[Any, set[str]]
+    _labels_per_node: dict[Any, Counter[str]]
+    _claim_counts: dict[str, Any]
+    _has_channel: bool
+    _routed_detections: int
+
+    def flush(self) -> None:  # pragma: no cover - MapBeliefs defines it
+        raise NotImplementedError
+
+    def node_of(self, obj: Mapping[str, Any]) -> Any | None:  # pragma: no cover - MapBeliefs defines it
+        raise NotImplementedError
+
+    def _predicate(self, class_name: str) -> str | None:  # pragma: no cover - MapBeliefs defines it
+        raise NotImplementedError
+
+    def _predicates_of(self, node: Any) -> set[str]:  # pragma: no cover - MapBeliefs defines it
+        raise NotImplementedError
+
+    def evidence_count(self) -> int:  # pragma: no cover - MapBeliefs defines it
+        raise NotImplementedError
+
+    def beliefs(self, obj: Mapping[str, Any]) -> dict[str, Any]:
+        """{predicate: BetaBelief} of a map object (empty for an object the backend never saw)."""
+        self.flush()
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return {}
+        return dict(self.graph.beliefs(node))
+
+    def probability(self, obj: Mapping[str, Any], predicate: str) -> float:
+        self.flush()
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return 0.5
+        return float(self.operator.probability(self.graph, node, predicate))
+
+    def committed_predicate(self, node: Any) -> str | None:
+        """The predicate with the highest committed probability (> tau), or None.
+
+        The candidates are the predicates the node's detections claimed. Only when none of them
+        commits are the predicates that the geometric labels alone asserted considered (comod,
+        ``geometric_evidence: label``): a sofa the detector always calls ``tv`` is labelled
+        ``sofa``, while one stray label of a segmenter does not outrank a class the detector
+        keeps naming and the geometry keeps confirming. Under independent Beta(1, 1) beliefs, a
+        single observation (mean 2/3) would otherwise outrank a well-supported class with a few
+        contradictions. The probability is the operator's (``FusionOperator.probability``), for
+        every operator."""
+        self.flush()
+        best = self._best_committed(sorted(self._predicates_of(node)), node)
+        if best is None:
+            extra = self._label_preds_per_node.get(node)
+            if extra:
+                best = self._best_committed(sorted(extra), node)
+        return best
+
+    def _best_committed(self, preds: Iterable[str], node: Any) -> str | None:
+        best, best_p = None, self.tau
+        probability = self.operator.probability
+        graph = self.graph
+        for pred in preds:
+            p = float(probability(graph, node, pred))
+            if p > best_p:
+                best, best_p = pred, p
+        return best
+
+    def _class_for(self, node: Any, pred: str | None) -> tuple[int | None, str] | None:
+        if pred is None:
+            return None
+        counts = self._names_per_node.get(node)
+        if not counts:
+            return None
+        predicate = self._predicate
+        rule = self.label_rule
+        if rule == "first":
+            for key in counts:  # Counter keeps first-seen order
+                if predicate(key[1]) == pred:
+                    return key
+            return self._class_named_by(pred)
+        if not isinstance(rule, str) and pred in rule:
+            name = rule[pred]
+            for key in counts:
+                if key[1] == name:
+                    return key
+            cid = next((i for i, n in self.class_names.items() if n == name), None)
+            return (cid, name)
+        if self._covers_several(pred):  # a merged predicate: the channel's own name, when it has one
+            own = self._channel_class(node, pred, counts)
+            if own is not None:
+                return own
+        best, best_n = None, 0
+        for key, n in counts.items():  # most frequent; ties keep first-seen order
+            if n > best_n and predicate(key[1]) == pred:
+                best, best_n = key, n
+        return best if best is not None else self._class_named_by(pred)
+
+    def _covers_several(self, pred: str) -> bool:
+        """Whether ``pred`` stands for several class names (a merged group: table, desk, ...)."""
+        table = self.table
+        spec = table.specs.get(pred) if table is not None else None
+        return spec is not None and len(spec.aliases) > 1
+
+    def _channel_class(self, node: Any, pred: str, counts: Counter[tuple[int | None, str]]) -> tuple[int | None, str] | None:
+        """(class id, name) of the label the channel gave most often at ``node`` among those naming
+        ``pred``'s classes (the detector's spelling and id when a claim used that name), or None."""
+        seen = self._labels_per_node.get(node)
+        vocab = self.vocabulary
+        if not seen or vocab is None:
+            return None
+        for label, _n in seen.most_common():
+            if vocab.predicate(label) != pred:
+                continue
+            key = normalise_class_name(label)
+            for cid, name in counts:
+                if normalise_class_name(name) == key:
+                    return (cid, name)
+            cid = next((i for i, n in sorted(self.class_names.items()) if normalise_class_name(n) == key), None)
+            return (cid, self.class_names[cid] if cid is not None else label)
+        return None
+
+    def _class_named_by(self, pred: str) -> tuple[int | None, str] | None:
+        """(class id, name) for a predicate no detection of the node named (the geometric labels
+        committed it): the first class of the class list whose predicate it is."""
+        predicate = self._predicate
+        for cid, name in sorted(self.class_names.items()):
+            if predicate(name) == pred:
+                return (cid, name)
+        return None
+
+    def committed_class(self, node: Any) -> tuple[int | None, str] | None:
+        """(class id, class name) of the node's committed predicate under ``label_rule``, or None
+        when nothing commits."""
+        return self._class_for(node, self.committed_predicate(node))
+
+    def node_label(self, node: Any) -> str:
+        """The class name the beliefs give graph node ``node`` (``unknown_label`` when nothing commits)."""
+        hit = self.committed_class(node)
+        return self.unknown_label if hit is None else hit[1]
+
+    def label_of(self, obj: Mapping[str, Any]) -> str | None:
+        """Class name from the beliefs (``unknown_label`` when nothing commits; None if unseen)."""
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return None
+        hit = self.committed_class(node)
+        return self.unknown_label if hit is None else hit[1]
+
+    def class_id_of(self, obj: Mapping[str, Any]) -> int | None:
+        """Class id from the beliefs (``unknown_class_id`` when nothing commits; None if unseen)."""
+        node = self.node_of(obj)
+        if node is None or node not in self.graph:
+            return None
+        hit = self.committed_class(node)
+        if hit is None or hit[0] is None:
+            return self.unknown_class_id
+        return hit[0]
+
+    def summary(self, objects: Sequence[Mapping[str, Any]] | None = None) -> BackendSummary:
+        """What the backend did, over ``objects`` (a map object list) or every live node it tracks:
+        objects labelled and left ``unknown``, and per detector class the claims (verified, refused,
+        unverifiable by the channel) and the objects whose vote is that class (committed, unknown,
+        written label differing from the vote). See :class:`~.summary.BackendSummary`."""
+        self.flush()
+        if objects is not None:
+            nodes = [n for n in (self.node_of(o) for o in objects) if n is not None and n in self.graph]
+        else:
+            nodes = [n for n in self.graph.nodes() if n in self._names_per_node]
+        attrs = self.graph.nx.nodes
+        filtered = sum(1 for n in nodes if attrs[n].get("cg_filtered"))
+        live = [n for n in nodes if not attrs[n].get("cg_filtered")]
+        per_class: dict[str, dict[str, int]] = {
+            name: {"claims": c.claims, "verified": c.verified, "refused": c.refused, "unverifiable": c.unverifiable}
+            for name, c in self._claim_counts.items()}
+        differing: list[dict[str, Any]] = []
+        labelled = 0
+        for n in live:
+            hit = self.committed_class(n)
+            labelled += hit is not None
+            names = self._names_per_node.get(n)
+            vote = _vote(names) if names else None
+            if vote is None:
+                continue
+            row = per_class.setdefault(vote, {})
+            key = "committed" if hit is not None else "unknown"
+            row[key] = row.get(key, 0) + 1
+            written = self.unknown_label if hit is None else hit[1]
+            if written != vote:
+                row["differ"] = row.get("differ", 0) + 1
+                differing.append({"node": str(n), "vote": vote, "label": written})
+        vocab = self.vocabulary
+        return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
+                              filtered=filtered, detections=self._routed_detections,
+                              events=self.evidence_count(),
+                              classes={k: ClassSummary(**v) for k, v in sorted(per_class.items())},
+                              differing=differing, channel=self.labels.report() if self._has_channel else {},
+                              vocabulary=getattr(vocab, "name", "") if vocab is not None else "")
+
+
+def _vote(names: Counter[tuple[int | None, str]]) -> str:
+    """ConceptGraphs' majority class name of an object's claims (ties to the first seen)."""
+    best, best_n = "", 0
+    for (_cid, name), n in names.items():
+        if n > best_n:
+            best, best_n = name, n
+    return best

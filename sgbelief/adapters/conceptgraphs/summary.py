@@ -1,0 +1,91 @@
+"""What the ConceptGraphs backend did: per class, the claims and how the channel judged them, the
+objects committed or left ``unknown``, and the labels that differ from ConceptGraphs' vote.
+
+:class:`BackendSummary` is what :meth:`MapBeliefs.summary` returns; the backend prints
+:meth:`BackendSummary.format` at ``uninstall()`` and writes :meth:`BackendSummary.to_dict` as JSON
+beside a saved map.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+__all__ = ["BackendSummary", "ClassSummary", "ClaimCounts"]
+
+
+class ClaimCounts:
+    """Per detector class: claims routed, and what the geometric channel said of them (by the
+    claim's sign: a claim with c >= 0.5 asserts the class). Mutable counters, one per class, kept
+    by the backend while it routes claims."""
+
+    __slots__ = ("claims", "verified", "refused", "unverifiable")
+
+    def __init__(self) -> None:
+        self.claims = 0
+        self.verified = 0
+        self.refused = 0
+        self.unverifiable = 0
+
+
+@dataclass(frozen=True)
+class ClassSummary:
+    """One detector class in :class:`BackendSummary` (objects grouped by their vote class)."""
+
+    claims: int = 0  #: claims routed with this class name
+    verified: int = 0  #: the channel's label corroborated the claim
+    refused: int = 0  #: the channel's label contradicted it (comod holds such a claim back)
+    unverifiable: int = 0  #: no label, a label that decides nothing, or a class the vocabulary cannot check
+    committed: int = 0  #: live objects whose vote is this class and whose beliefs commit a label
+    unknown: int = 0  #: live objects whose vote is this class and where nothing commits
+    differ: int = 0  #: live objects whose vote is this class and whose written label is another
+
+
+@dataclass(frozen=True)
+class BackendSummary:
+    """Counts over the backend's live map objects and the claims it routed (see :meth:`format`)."""
+
+    objects: int  #: live (not merged away, not filtered) objects the backend tracks
+    labelled: int  #: objects whose label comes from a committed predicate
+    unknown: int  #: objects left unknown: nothing commits (``unknown_label`` / ``unknown_class_id``)
+    filtered: int  #: objects ConceptGraphs filtered (marked ``cg_filtered``)
+    detections: int  #: per-detection claims routed
+    events: int  #: evidence entries in the graph
+    classes: dict[str, ClassSummary] = field(default_factory=dict)  #: per detector class
+    #: objects whose written label differs from the vote: {"node", "vote", "label"}
+    differing: list[dict[str, Any]] = field(default_factory=list)
+    #: labels the channel gave: total, matched, and unmatched label -> count (empty: no channel)
+    channel: dict[str, Any] = field(default_factory=dict)
+    vocabulary: str = ""  #: the vocabulary's name (its class list, or the table)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (what the backend writes beside a saved map)."""
+        out = asdict(self)
+        out["format"] = "sgbelief.cg_summary"
+        out["version"] = 1
+        return out
+
+    def format(self) -> str:
+        """A plain-text report: one line per class, then the objects whose label changed."""
+        lines = [f"sgbelief backend ({self.vocabulary or 'vocabulary'}): {self.detections} claims routed, "
+                 f"{self.objects} objects: {self.labelled} labelled, {self.unknown} unknown"
+                 + (f", {self.filtered} filtered" if self.filtered else "")]
+        if self.classes:
+            width = max(8, *(len(c) for c in self.classes))
+            head = ("class".ljust(width) + "  claims  verified  refused  unverifiable  committed  unknown  "
+                    "differ from vote")
+            lines.append(head)
+            for name in sorted(self.classes, key=lambda c: (-self.classes[c].claims, c)):
+                s = self.classes[name]
+                lines.append(f"{name.ljust(width)}  {s.claims:6d}  {s.verified:8d}  {s.refused:7d}  "
+                             f"{s.unverifiable:12d}  {s.committed:9d}  {s.unknown:7d}  {s.differ:16d}")
+        if self.differing:
+            shown = ", ".join(f"{d['node']}: {d['vote']} -> {d['label']}" for d in self.differing[:12])
+            more = f" (+{len(self.differing) - 12} more)" if len(self.differing) > 12 else ""
+            lines.append(f"labels that differ from the vote: {shown}{more}")
+        if self.channel:
+            unmatched = self.channel.get("unmatched") or {}
+            lines.append(f"channel: {self.channel.get('labels', 0)} labels, {self.channel.get('matched', 0)} matched"
+                         + (", unmatched: " + ", ".join(f"{k!r} x{v}" for k, v in unmatched.items())
+                            if unmatched else ""))
+        return "\n".join(lines)
