@@ -64,7 +64,7 @@ def test_default_vocabulary_is_the_class_list() -> None:
     merged = ConceptGraphsBackend("comod", class_names=CLASSES, merge=["is_table_or_desk"], print_summary=False)
     assert merged.vocabulary.predicate("desk") == merged.vocabulary.predicate("table") == "is_table_or_desk"
     closed = ConceptGraphsBackend("comod", vocabulary="scannet", print_summary=False)
-    assert closed.vocabulary.class_names is None and "is_tv" not in closed.table  # the closed table, by name
+    assert closed.vocabulary.class_names is None and "is_lamp" not in closed.table  # the closed table, by name
     replica = ConceptGraphsBackend("comod", class_names="replica", print_summary=False)
     assert replica.vocabulary.predicate("tv-screen") == "is_tv" and len(replica.table.predicates) > 90
 
