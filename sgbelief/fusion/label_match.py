@@ -12,13 +12,13 @@ import warnings
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from sgbelief.errors import ChannelMismatchError
+from sgbelief.errors import ChannelMismatchError, SgbeliefWarning
 from sgbelief.fusion.compatibility import normalise_class_name, singular_name
 
 __all__ = ["UnmatchedLabelWarning", "check_class_names", "label_index", "label_key", "table_labels"]
 
 
-class UnmatchedLabelWarning(UserWarning):
+class UnmatchedLabelWarning(SgbeliefWarning):
     """A geometric label that matches no label of the vocabulary: claims checked against it stay unverified."""
 
 
