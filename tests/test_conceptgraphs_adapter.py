@@ -134,6 +134,29 @@ def test_unknown_label_when_nothing_commits():
     assert backend.label_of(det) == "unknown"
 
 
+def test_without_abstention_the_most_probable_claimed_class_is_written():
+    """abstain=False: an object whose classes all stay at or below tau gets the most probable one;
+    the default abstains (unknown)."""
+    labels = {}
+    for abstain in (True, False):
+        backend = ConceptGraphsBackend("comod", abstain=abstain, class_names=["chair", "sofa", "table"],
+                                       print_summary=False)
+        backend.graph.add_node("v")
+        backend.route_detection(make_detection(blob((0, 0, 0)), 1, "sofa", 0.45, 0), {"v": 1.0})
+        backend.route_detection(make_detection(blob((0, 0, 0)), 0, "chair", 0.3, 1), {"v": 1.0})
+        p = {k: b.mean for k, b in backend.graph.beliefs("v").items()}
+        assert max(p.values()) <= 0.5 and p["is_sofa"] > p["is_chair"]
+        labels[abstain] = backend.committed_predicate("v")
+    assert labels == {True: None, False: "is_sofa"}
+
+
+def test_the_backend_keeps_exclusive_classes_apart_unless_configured():
+    assert ConceptGraphsBackend("comod", print_summary=False).operator.config.exclusive_evidence == "none"
+    on = ConceptGraphsBackend("comod", operator_config={"exclusive_evidence": "rivals"}, print_summary=False)
+    assert on.operator.config.exclusive_evidence == "rivals"
+    assert on.operator.config.geometric_evidence == "label"  # the backend's other default still applies
+
+
 # ---------------------------------------------------------------- return contracts
 def test_same_return_contract_as_original_on_stand_ins():
     c = cfg()
@@ -250,9 +273,9 @@ def test_patch_swaps_and_restores_every_binding():
             objects.append(make_detection(blob((0, 0, 0)), 1, "table", 0.6, 0))
             det = make_detection(blob((0, 0, 0)), 0, "chair", 0.9, 1, seed=1)
             objects = pipe.merge_detections_to_objects(cfg(), DetectionList([det]), objects, torch.tensor([[1.2]]))
-            # two claims (chair, table); the chair's also counts against the table (exclusive_evidence: rivals)
+            # two claims (chair, table); the backend keeps exclusive classes apart (exclusive_evidence: none)
             claims = [e for e in backend.graph.provenance.iter_entries() if e.verdict is None or e.verdict.is_claim]
-            assert len(claims) == 2 and backend.graph.evidence_count() == 3
+            assert len(claims) == 2 and backend.graph.evidence_count() == 2
             objects.get_most_common_class()
         for (modname, name), old in saved.items():
             assert getattr(__import__("sys").modules[modname], name) is old, (modname, name)

@@ -61,7 +61,10 @@ class ConceptGraphsBackend(MapBeliefs):
             (the operator default elsewhere is ``"verdict"``).
         label_key: detection-dict key holding a per-detection geometric label (popped from the dict
             before ConceptGraphs' merge sees it, since the original merges reject unknown keys).
-        unknown_label / unknown_class_id: label written when no predicate commits.
+        unknown_label / unknown_class_id: label written when no predicate commits (``abstain``,
+            the default) or when the claimed classes tie.
+        abstain: write ``unknown_label`` whenever no predicate commits (default True); False writes
+            the claimed class of highest probability instead (every object gets a class).
         tau / tau_t: commit threshold and targeting-mass threshold (default: the operator config).
         on_filter: ``"mark"`` (node kept with ``cg_filtered=True``) or ``"remove"``.
         confidence_map: optional map of the detector's raw confidence before it enters an event.
@@ -102,6 +105,7 @@ class ConceptGraphsBackend(MapBeliefs):
         class_names: Sequence[str] | str | Path | None = None,
         gc_checkpoints: bool = False,
         label_rule: str | Mapping[str, str] = "most_frequent",
+        abstain: bool = True,
         geometric_evidence: str | None = None,
         taxonomy: Any = "indoor",
         merge: bool | Iterable[str] = False,
@@ -146,7 +150,7 @@ class ConceptGraphsBackend(MapBeliefs):
             op, vocab, graph if graph is not None else SceneGraph(), seed_from_graph=graph is not None,
             context=context, channel=channel, label_key=label_key, unknown_label=unknown_label,
             unknown_class_id=unknown_class_id, tau=tau, tau_t=tau_t, on_filter=on_filter,
-            confidence_map=confidence_map, class_names=class_names, label_rule=label_rule)
+            confidence_map=confidence_map, class_names=class_names, label_rule=label_rule, abstain=abstain)
         self._share_table = isinstance(operator, str) or getattr(op, "vocabulary", None) is None
         self._patcher: Patcher | None = None
         self.gc_checkpoints = bool(gc_checkpoints)
@@ -321,9 +325,17 @@ def _with_geometric_evidence(config: Any, geometric_evidence: str | None) -> Any
     from sgbelief.fusion.config import OperatorConfig, resolve_config
 
     base = OperatorConfig.default() if config is None else resolve_config(config)
-    if geometric_evidence is None:
-        if config is not None and "geometric_evidence" in base.model_fields_set:
-            return base
-        geometric_evidence = "label"
-    return OperatorConfig.from_mapping({**base.model_dump(), "geometric_evidence": geometric_evidence},
+    own = base.model_fields_set if config is not None else set()
+    update: dict[str, Any] = {}
+    if geometric_evidence is not None or "geometric_evidence" not in own:
+        update["geometric_evidence"] = geometric_evidence if geometric_evidence is not None else "label"
+    if "exclusive_evidence" not in own:
+        # the label rule already reads one class among the exclusive ones; the coupling's entries
+        # reach only rival pairs that exist when a claim commits, and with the early claims'
+        # small calibrated weights that order effect cost label accuracy in ConceptGraphs' own
+        # loop with no channel (docs/conceptgraphs.md, "Labels out"): off unless the config sets it
+        update["exclusive_evidence"] = "none"
+    if not update:
+        return base
+    return OperatorConfig.from_mapping({**base.model_dump(), **update},
                                        source="ConceptGraphsBackend(geometric_evidence=...)")

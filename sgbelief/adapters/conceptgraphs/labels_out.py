@@ -33,6 +33,7 @@ class LabelReader:
     label_rule: Any
     unknown_label: str
     unknown_class_id: int
+    abstain: bool
     labels: Any
     _names_per_node: dict[Any, Counter[tuple[int | None, str]]]
     _label_preds_per_node: dict[Any, set[str]]
@@ -81,14 +82,29 @@ class LabelReader:
         keeps naming and the geometry keeps confirming. Under independent Beta(1, 1) beliefs, a
         single observation (mean 2/3) would otherwise outrank a well-supported class with a few
         contradictions. The probability is the operator's (``FusionOperator.probability``), for
-        every operator."""
+        every operator.
+
+        When nothing commits and ``abstain`` is off, the object still gets the claimed class of
+        highest probability (the most probable of its exclusive classes: the Bayes choice when
+        every object must carry one label), unless two classes tie."""
         self.flush()
-        best = self._best_committed(sorted(self._predicates_of(node)), node)
+        claimed = sorted(self._predicates_of(node))
+        best = self._best_committed(claimed, node)
         if best is None:
             extra = self._label_preds_per_node.get(node)
             if extra:
                 best = self._best_committed(sorted(extra), node)
+        if best is None and not self.abstain:
+            best = self._most_probable(claimed, node)
         return best
+
+    def _most_probable(self, preds: Iterable[str], node: Any) -> str | None:
+        """The predicate of strictly highest probability among ``preds`` (None on a tie or none)."""
+        probability = self.operator.probability
+        ranked = sorted(((float(probability(self.graph, node, p)), p) for p in preds), reverse=True)
+        if not ranked or (len(ranked) > 1 and ranked[0][0] == ranked[1][0]):
+            return None
+        return ranked[0][1]
 
     def _best_committed(self, preds: Iterable[str], node: Any) -> str | None:
         best, best_p = None, self.tau

@@ -50,7 +50,10 @@ class MapBeliefs(LabelReader):
             ``fn(detection, node, t) -> str | None``.  A detection's own ``label_key`` entry wins.
         label_key: detection-dict key holding a per-detection geometric label (popped from the dict
             before ConceptGraphs' merge sees it, since the original merges reject unknown keys).
-        unknown_label / unknown_class_id: label written when no predicate commits.
+        unknown_label / unknown_class_id: label written when no predicate commits (``abstain``,
+            the default) or the claimed classes tie.
+        abstain: write ``unknown_label`` whenever no predicate commits (default True); False writes
+            the claimed class of highest probability instead.
         tau / tau_t: commit threshold and targeting-mass threshold (default: the operator config).
         on_filter: ``"mark"`` (node kept with ``cg_filtered=True``) or ``"remove"``.
         confidence_map: optional map of the detector's raw confidence before it enters an event.
@@ -80,6 +83,7 @@ class MapBeliefs(LabelReader):
         confidence_map: Callable[[float], float] | None = None,
         class_names: Sequence[str] | None = None,
         label_rule: str | Mapping[str, str] = "most_frequent",
+        abstain: bool = True,
     ) -> None:
         from sgbelief.fusion.channel import NullChannel
         from sgbelief.fusion.operators.base import BaseOperator
@@ -114,6 +118,7 @@ class MapBeliefs(LabelReader):
         self.label_key = label_key
         self.unknown_label = unknown_label
         self.unknown_class_id = unknown_class_id
+        self.abstain = bool(abstain)
         if on_filter not in ("mark", "remove"):
             raise ValueError("on_filter must be 'mark' or 'remove'")
         self.on_filter = on_filter
