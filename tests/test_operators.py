@@ -150,7 +150,11 @@ def test_beliefs_stay_finite_and_positive(stream, name) -> None:
 
 
 def _frozen_cal() -> FusionOperator:
-    op = make_operator("cal", {"tau_rev": 1e9}, TABLE)  # no revision: every update is committed
+    # no revision: every update is committed. The exclusive coupling reaches only the rival pairs a
+    # map holds when a claim commits (docs/method.md §8): a retracted claim that created a pair
+    # leaves the later rivals' entries there, exact in Eq. 4's sense (tests/test_consensus.py) but
+    # not equal to a map that never saw the claim, which is what this test compares against
+    op = make_operator("cal", {"tau_rev": 1e9, "exclusive_evidence": "none"}, TABLE)
     rng = random.Random(7)
     for _ in range(300):
         c = rng.random()

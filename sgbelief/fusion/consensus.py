@@ -102,6 +102,8 @@ class MapConsensus:
         self.counts: dict[Any, dict[str, int]] = {}
         self.n_at_fit = 0
         self.n_fits = 0
+        #: no more refits (the operator's calibration is frozen): the last fit stays
+        self.frozen = False
 
     # decoded columns (diagnostics, tests)
     @property
@@ -172,6 +174,8 @@ class MapConsensus:
     # ------------------------------------------------------------------ batches
     def due(self) -> bool:
         """Whether enough claims arrived since the last refit: max(every, growth * held) new ones."""
+        if self.frozen:
+            return False
         n = len(self.event)
         return n - self.n_at_fit >= max(self.every, self.growth * self.n_at_fit)
 

@@ -102,6 +102,8 @@ class CalibratedOperator(BaseOperator):
         self._label_seen: dict[int, tuple[ProvenanceStore, dict[tuple[Any, str], int]]] = {}
         #: the map-wide consensus (claim table, labels, its calibration) per provenance store
         self._consensus: dict[int, tuple[ProvenanceStore, MapConsensus]] = {}
+        #: freeze_calibration() also stops the consensus' refits
+        self._consensus_frozen = False
         #: the exclusive classes of the vocabulary (the consensus' latent classes), when it is on
         self.consensus_classes: frozenset[str] = frozenset()
         if cfg.calibration.consensus.method != "none" and self.vocabulary is not None:
@@ -262,6 +264,7 @@ class CalibratedOperator(BaseOperator):
         if held is None or held[0] is not prov:
             held = self._consensus[id(prov)] = (prov, MapConsensus(self.config.calibration, self.consensus_classes,
                                                                       self.vocabulary.asserted_tables()))  # type: ignore[union-attr]
+            held[1].frozen = self._consensus_frozen
         return held[1]
 
     def _context(self, event: EvidenceEvent, n_prior_claims: int) -> str:
@@ -397,6 +400,9 @@ class CalibratedOperator(BaseOperator):
         """Stop learning from new outcomes (e.g. to replay with a fixed calibration)."""
         self.calibrator_.refit_all()
         self.calibrator_.frozen = True
+        self._consensus_frozen = True
+        for _prov, consensus in self._consensus.values():
+            consensus.frozen = True
 
     def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
         """Retract an event exactly (cascading within T_cor); the retracted claims no longer count
