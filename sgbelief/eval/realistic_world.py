@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sgbelief.eval.realistic_config import RealisticConfig
-from sgbelief.eval.sim_world import occlusion_ioa, project_boxes
+from sgbelief.eval.sim_world import occlusion_ioa, on_top_of, project_boxes
 
 __all__ = ["Room", "FrameView", "room_types", "build_room", "room_views"]
 
@@ -133,13 +133,7 @@ def build_room(cfg: RealisticConfig, scene: str, rtype: str, rng: np.random.Gene
                     sup = [i for i, c in enumerate(cats) if c in spec.supports]
                     if sup:
                         si = sup[int(rng.integers(len(sup)))]
-                        slo, shi = los[si], his[si]
-                        half = np.minimum(size / 2, (shi - slo) / 2)
-                        cx = float(rng.uniform(slo[0] + half[0], shi[0] - half[0] + 1e-9))
-                        cy = float(rng.uniform(slo[1] + half[1], shi[1] - half[1] + 1e-9))
-                        z0 = float(shi[2])
-                        lo = np.array([cx - half[0], cy - half[1], z0])
-                        hi = np.array([cx + half[0], cy + half[1], z0 + size[2]])
+                        lo, hi = on_top_of(rng, los[si], his[si], size)
                     else:
                         lo, hi = on_floor(size, rng.uniform(0, wx), rng.uniform(0, wy))
                 add(name, lo, hi)

@@ -262,14 +262,8 @@ def build_indoor_scene(cfg: SimConfig, scene: str, rng: np.random.Generator) -> 
                     _ = tc
                 else:  # on_top
                     si = supports[int(rng.integers(len(supports)))]
-                    slo, shi = los[si], his[si]
-                    half = np.minimum(size / 2, (shi - slo) / 2)
-                    cx = float(rng.uniform(slo[0] + half[0], shi[0] - half[0] + 1e-9))
-                    cy = float(rng.uniform(slo[1] + half[1], shi[1] - half[1] + 1e-9))
-                    z0 = float(shi[2])
-                    add(label, np.array([cx - half[0], cy - half[1], z0]),
-                        np.array([cx + half[0], cy + half[1], z0 + size[2]]), None,
-                        {"placement": placement, "support": int(si)})
+                    lo, hi = on_top_of(rng, los[si], his[si], size)
+                    add(label, lo, hi, None, {"placement": placement, "support": int(si)})
 
     n_frames = int(round(rng.integers(ind.frames_per_scene[0], ind.frames_per_scene[1] + 1) * cfg.scale))
     phase = float(rng.uniform(0, 2 * np.pi))
@@ -291,6 +285,17 @@ def build_indoor_scene(cfg: SimConfig, scene: str, rng: np.random.Generator) -> 
 # ----------------------------------------------------------------------------------- camera
 
 _CORNER_SEL = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=bool)
+
+
+def on_top_of(rng: np.random.Generator, support_lo: F, support_hi: F, size: F) -> tuple[F, F]:
+    """A box of ``size`` resting on the top face of the support box, at a uniform spot that keeps it
+    within the support's footprint (clamped to the support's size): its (min, max) corners."""
+    half = np.minimum(size / 2, (support_hi - support_lo) / 2)
+    cx = float(rng.uniform(support_lo[0] + half[0], support_hi[0] - half[0] + 1e-9))
+    cy = float(rng.uniform(support_lo[1] + half[1], support_hi[1] - half[1] + 1e-9))
+    z0 = float(support_hi[2])
+    return (np.array([cx - half[0], cy - half[1], z0]),
+            np.array([cx + half[0], cy + half[1], z0 + size[2]]))
 
 
 def project_boxes(lo: F, hi: F, pos: F, yaw: float, cam: Camera) -> tuple[F, F, NDArray[np.bool_]]:
