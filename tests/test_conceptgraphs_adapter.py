@@ -157,6 +157,43 @@ def test_the_backend_keeps_exclusive_classes_apart_unless_configured():
     assert on.operator.config.geometric_evidence == "label"  # the backend's other default still applies
 
 
+def test_the_backend_turns_the_consensus_off_unless_configured_and_says_so():
+    """The map-wide consensus is off in the backend by default (docs/conceptgraphs.md, "Labels
+    out"); a config that sets the calibration keeps its own; the summary names both settings."""
+    off = ConceptGraphsBackend("comod", class_names=CLASSES, print_summary=False)
+    assert off.operator.config.calibration.consensus.method == "none"
+    assert off.operator.consensus_classes == frozenset()
+    on = ConceptGraphsBackend("comod", class_names=CLASSES, print_summary=False,
+                              operator_config={"calibration": {"consensus": {"method": "dawid_skene"}}})
+    assert on.operator.consensus_classes == frozenset({"is_chair", "is_table", "is_sofa"})
+    text = off.summary([]).format()
+    assert "operator: comod (geometric_evidence=label, consensus=none, exclusive_evidence=none)" in text
+    assert off.summary([]).to_dict()["operator"]["consensus"] == "none"
+
+
+def test_a_merge_moves_the_operators_claim_table_with_the_beliefs():
+    """ConceptGraphs merges two map objects: the consensus' claims and the support counts of the
+    absorbed object become the kept one's (they were left under the absorbed id)."""
+    be = ConceptGraphsBackend("comod", class_names=CLASSES, print_summary=False,
+                              operator_config={"calibration": {"consensus": {"method": "dawid_skene"}}})
+    a = make_detection(blob((0, 0, 0), seed=1), 0, "chair", 0.8, 0, mask_idx=0, seed=1)
+    b = make_detection(blob((3, 0, 0), seed=2), 0, "chair", 0.7, 0, mask_idx=1, seed=2)
+    na, nb = be.ensure_node(a), be.ensure_node(b)
+    be.route_detection(a, {na: 1.0})
+    be.route_detection(b, {nb: 1.0})
+    be.flush()
+    cons = be.operator._consensus[id(be.graph.provenance)][1]
+    per_node = Counter(cons.node)
+    assert set(per_node) == {na, nb}
+    n = sum(per_node.values())
+    be.migrate(a, b)
+    assert Counter(cons.node) == {na: n}
+    assert cons.counts == {na: {"is_chair": n}}
+    assert be.operator._claims_so_far(be.graph.provenance, na, "is_chair") == n
+    probas = cons.fit_consensus()
+    assert probas.shape[0] == 1 and cons.task_of(nb) == cons.task_of(na) == 0
+
+
 # ---------------------------------------------------------------- return contracts
 def test_same_return_contract_as_original_on_stand_ins():
     c = cfg()

@@ -234,3 +234,23 @@ def test_the_paper_variant_turns_both_off() -> None:
     assert op.config.exclusive_evidence == "none"
     assert op.config.calibration.consensus.method == "none"
     assert not op.consensus_classes and not op.excludes_rivals
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_a_vocabulary_set_after_construction_turns_the_consensus_on(engine: str) -> None:
+    """The ConceptGraphs backend learns its class list after it built the operator and then sets
+    ``operator.vocabulary``: the exclusive classes, and the consensus over them, follow it (they were
+    computed once at construction, so the consensus never ran in the backend)."""
+    op = make_operator("comod", vocabulary=None, engine=engine)
+    assert op.consensus_classes == frozenset()
+    op.vocabulary = _table()
+    assert op.consensus_classes == frozenset(f"is_{k}" for k in CLASSES)
+    g = SceneGraph(vocabulary=_table())
+    g.add_node("v")
+    op.update(g, EvidenceEvent(id="e0", t=0, predicate="is_chair", confidence=0.8, targets={"v": 1.0},
+                               context="det"))
+    held = op._consensus[id(g.provenance)][1]
+    assert held.exclusive == op.consensus_classes and len(held.node) == 1
+    op.vocabulary = SubsumptionTable({"is_a": {"positive": ["a"], "negative": ["b"]},
+                                      "is_b": {"positive": ["b"], "negative": ["a"]}}, name="ab", labels=["a", "b"])
+    assert op.consensus_classes == frozenset({"is_a", "is_b"})

@@ -8,6 +8,12 @@ A :class:`MapConsensus` belongs to one map (one provenance store) and holds
 * per element, the claims each exclusive class received so far (a claim's standing,
   :func:`~sgbelief.fusion.rules.standing`).
 
+When two elements of the map are merged (a ConceptGraphs merge of two map objects,
+``FusionOperator.merge_nodes``), the absorbed element's claims and labels become the kept
+element's (:meth:`MapConsensus.merge_elements`): a claim is about the object, whatever id it
+arrived under. Without that, every detection a mapper registers as a new object and merges a frame
+later stays a task of its own with one claim, and the model explains the map as mostly "none".
+
 Every so often (at least ``every`` new claims and ``growth`` times the claims held, so O(log n)
 refits over a stream) it refits, in one batch over the whole table:
 
@@ -100,6 +106,10 @@ class MapConsensus:
         self.labels: dict[tuple[Any, int], int] = {}
         #: element -> {exclusive predicate: claims so far}
         self.counts: dict[Any, dict[str, int]] = {}
+        #: element code -> the code it was merged into (itself when never merged); resolved at fit time
+        self._merged_into = array("l")
+        #: row of each element code in the last fit's posterior (-1: no claim)
+        self._row_of_code = np.zeros(0, dtype=np.intp)
         self.n_at_fit = 0
         self.n_fits = 0
         #: no more refits (the operator's calibration is frozen): the last fit stays
@@ -108,7 +118,8 @@ class MapConsensus:
     # decoded columns (diagnostics, tests)
     @property
     def node(self) -> list[Any]:
-        return [self._tasks.names[i] for i in self.task]
+        rep, names = self._representatives(), self._tasks.names
+        return [names[rep[i]] for i in self.task]
 
     @property
     def pred(self) -> list[str]:
@@ -136,10 +147,25 @@ class MapConsensus:
                     max_other = n
         return held.get(predicate, 0), n_others, max_other
 
+    def _task_code(self, node: Any) -> int:
+        """The element's code (a new one, merged into itself, for an element not seen yet)."""
+        i = self._tasks.code(node)
+        if i == len(self._merged_into):
+            self._merged_into.append(i)
+        return i
+
+    def _representatives(self) -> np.ndarray:
+        """Per element code, the code of the element it ended up merged into (follows chains)."""
+        rep = np.frombuffer(self._merged_into, dtype=np.int_).astype(np.intp) if len(self._merged_into) else \
+            np.zeros(0, dtype=np.intp)
+        while len(rep) and np.any(rep[rep] != rep):
+            rep = rep[rep]
+        return rep
+
     def add_claim(self, node: Any, predicate: str, context: str, confidence: float, cell: Hashable,
                   decisive: bool, event_id: str, mass: float = 1.0) -> None:
         """Append one applied claim of an exclusive class (``mass``: its targeting mass T(v))."""
-        self.task.append(self._tasks.code(node))
+        self.task.append(self._task_code(node))
         self.cls.append(self._classes.code(predicate))
         self.ctx_code.append(self._contexts.code(context))
         self.cell_code.append(self._cells.code(cell))
@@ -155,6 +181,21 @@ class MapConsensus:
     def add_label(self, node: Any, t: int, label: str) -> None:
         """The channel labelled ``node`` ``label`` at time ``t`` (kept once per (node, t))."""
         self.labels[(node, t)] = self._labels.code(label)
+
+    def merge_elements(self, keep: Any, absorb: Any) -> None:
+        """Element ``absorb`` was merged into ``keep``: from now on its claims and labels are
+        ``keep``'s (O(1) here plus the two elements' class counts; the table is re-coded at the
+        next fit)."""
+        if absorb == keep or absorb not in self._tasks.index:
+            return
+        a, k = self._tasks.index[absorb], self._task_code(keep)
+        self._merged_into[a] = k
+        self._tasks.index[absorb] = k  # a late claim under the absorbed id counts for keep
+        moved = self.counts.pop(absorb, None)
+        if moved:
+            held = self.counts.setdefault(keep, {})
+            for p, n in moved.items():
+                held[p] = held.get(p, 0) + n
 
     def drop_events(self, event_ids: set[str]) -> None:
         """Forget the claims of retracted events (the next refit no longer sees them)."""
@@ -205,7 +246,7 @@ class MapConsensus:
             return
         cls = np.asarray(self.cls, dtype=np.int64)[silent]
         cell = np.asarray(self.cell_code, dtype=np.int64)[silent]
-        q = probas[np.asarray(self.task, dtype=np.int64)[silent], cls]
+        q = probas[self._row_of_code[np.asarray(self.task, dtype=np.intp)[silent]], cls]
         c = np.asarray(self.conf)[silent]
         levels = [cell * _MAX_CLASSES + cls, cell, np.asarray(self.ctx_code, dtype=np.int64)[silent]]
         self.calibration.fit(levels, c, q)
@@ -213,9 +254,16 @@ class MapConsensus:
     def fit_consensus(self) -> np.ndarray:
         """The Dawid–Skene posterior over classes (+ none) per element (rows: task codes, columns:
         class codes, the last one *none*); the fitted model is ``self.ds_``."""
-        n_t, k, b = len(self._tasks.names), len(self._classes.names), self.bins
+        k, b = len(self._classes.names), self.bins
         n_ctx, n_geo = len(self._contexts.names), len(self._labels.names)
-        task = np.asarray(self.task, dtype=np.intp)
+        # tasks: the elements that received claims, merged elements counted as one
+        rep = self._representatives()
+        codes, task = np.unique(rep[np.asarray(self.task, dtype=np.intp)], return_inverse=True)
+        task = task.astype(np.intp)
+        n_t = len(codes)
+        row_of_rep = np.full(len(rep), -1, dtype=np.intp)
+        row_of_rep[codes] = np.arange(n_t)
+        self._row_of_code = row_of_rep[rep]
         cls = np.asarray(self.cls, dtype=np.intp)
         ctx = np.asarray(self.ctx_code, dtype=np.intp)
         mass = np.asarray(self.mass)
@@ -224,7 +272,9 @@ class MapConsensus:
         support_base, geo_base = k * b, k * b + len(_SUPPORT_EDGES)
         n_claims = np.bincount(task, minlength=n_t)
         support = np.array([support_bucket(int(x)) for x in n_claims], dtype=np.intp)
-        geo = [(self._tasks.index.get(node, -1), code) for (node, _t), code in self.labels.items()]
+        row = self._row_of_code
+        geo = [(row[i] if (i := self._tasks.index.get(node, -1)) >= 0 else -1, code)
+               for (node, _t), code in self.labels.items()]
         geo_arr = np.array([g for g in geo if g[0] >= 0], dtype=np.intp).reshape(-1, 2)
         tasks = np.concatenate([task, np.arange(n_t), geo_arr[:, 0]])
         workers = np.concatenate([ctx, np.full(n_t, n_ctx), np.full(len(geo_arr), n_ctx + 1)])
@@ -254,8 +304,10 @@ class MapConsensus:
         return self._classes.index.get(predicate, -1)
 
     def task_of(self, node: Any) -> int:
-        """The row of ``node`` in :meth:`fit_consensus`'s posterior (-1 if never claimed)."""
-        return self._tasks.index.get(node, -1)
+        """The row of ``node`` in the last :meth:`fit_consensus`'s posterior (-1 if it had no
+        claim then; a merged element gives the row of the element it was merged into)."""
+        i = self._tasks.index.get(node, -1)
+        return int(self._row_of_code[i]) if 0 <= i < len(self._row_of_code) else -1
 
     def _label_class(self, label: str) -> int:
         for p in self.asserted.get(label, ()):

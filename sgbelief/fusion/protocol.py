@@ -165,7 +165,10 @@ class FusionOperator(Protocol):
       when an event is rejected, the events before it stay applied and the error propagates;
     - ``tick(graph, t)`` advances time without evidence (queue timeouts, compaction);
     - ``probability(graph, node, predicate)`` is the operator's probability that the predicate holds;
-    - ``retract(graph, event_id)`` removes an event's entries exactly and returns the retracted ids.
+    - ``retract(graph, event_id)`` removes an event's entries exactly and returns the retracted ids;
+    - ``merge_nodes(graph, keep, absorb)`` merges element ``absorb`` into ``keep``
+      (``graph.merge_nodes``) and moves whatever the operator keeps per element with it (claim
+      counts, the consensus' claim table), so later claims at ``keep`` see the merged history.
     """
 
     name: str
@@ -184,3 +187,5 @@ class FusionOperator(Protocol):
     def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float: ...
 
     def retract(self, graph: SceneGraph, event_id: str) -> list[str]: ...
+
+    def merge_nodes(self, graph: SceneGraph, keep: Any, absorb: Any) -> None: ...

@@ -335,6 +335,15 @@ def _with_geometric_evidence(config: Any, geometric_evidence: str | None) -> Any
         # small calibrated weights that order effect cost label accuracy in ConceptGraphs' own
         # loop with no channel (docs/conceptgraphs.md, "Labels out"): off unless the config sets it
         update["exclusive_evidence"] = "none"
+    if "calibration" not in own and base.calibration.consensus.method != "none":
+        # the map-wide consensus (Dawid-Skene) needs many elements per class; a ConceptGraphs map
+        # holds tens of objects, most claims land on short-lived objects the mapper later filters or
+        # merges, and the fit explains them as "none of these": without a channel that cost 0.4-0.6
+        # label accuracy in ConceptGraphs' own loop (docs/conceptgraphs.md, "Labels out"). Off
+        # unless the config sets it; the summary says which.
+        cal = base.calibration.model_dump()
+        cal["consensus"] = {**cal["consensus"], "method": "none"}
+        update["calibration"] = cal
     if not update:
         return base
     return OperatorConfig.from_mapping({**base.model_dump(), **update},

@@ -245,7 +245,19 @@ class LabelReader:
                               events=self.evidence_count(),
                               classes={k: ClassSummary(**v) for k, v in sorted(per_class.items())},
                               differing=differing, channel=self.labels.report() if self._has_channel else {},
-                              vocabulary=getattr(vocab, "name", "") if vocab is not None else "")
+                              vocabulary=getattr(vocab, "name", "") if vocab is not None else "",
+                              operator=self._operator_settings())
+
+    def _operator_settings(self) -> dict[str, str]:
+        """The operator's name and its settings for claims the channel does not decide."""
+        op = self.operator
+        out = {"name": str(getattr(op, "name", type(op).__name__))}
+        cfg = getattr(op, "config", None)
+        if cfg is not None:
+            out["geometric_evidence"] = str(cfg.geometric_evidence)
+            out["consensus"] = str(cfg.calibration.consensus.method)
+            out["exclusive_evidence"] = str(cfg.exclusive_evidence)
+        return out
 
 
 def _vote(names: Counter[tuple[int | None, str]]) -> str:

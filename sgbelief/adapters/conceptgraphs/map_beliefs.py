@@ -451,7 +451,7 @@ class MapBeliefs(LabelReader):
         if self._external_graph:  # pick up evidence the caller's graph held before the merge moves it
             self._predicates_of(raw)
             self._predicates_of(keep)
-        self.graph.merge_nodes(keep, raw)
+        self.operator.merge_nodes(self.graph, keep, raw)
         self._detections_per_node[keep] += self._detections_per_node.pop(raw, 0)
         names = self._names_per_node.setdefault(keep, Counter())
         names.update(self._names_per_node.pop(raw, Counter()))

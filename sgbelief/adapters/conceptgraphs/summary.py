@@ -57,6 +57,9 @@ class BackendSummary:
     #: labels the channel gave: total, matched, and unmatched label -> count (empty: no channel)
     channel: dict[str, Any] = field(default_factory=dict)
     vocabulary: str = ""  #: the vocabulary's name (its class list, or the table)
+    #: the operator and the settings that decide what a claim with no channel outcome does:
+    #: {"name", "geometric_evidence", "consensus", "exclusive_evidence"} (those it has)
+    operator: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (what the backend writes beside a saved map)."""
@@ -83,6 +86,9 @@ class BackendSummary:
             shown = ", ".join(f"{d['node']}: {d['vote']} -> {d['label']}" for d in self.differing[:12])
             more = f" (+{len(self.differing) - 12} more)" if len(self.differing) > 12 else ""
             lines.append(f"labels that differ from the vote: {shown}{more}")
+        if self.operator:
+            rest = ", ".join(f"{k}={v}" for k, v in self.operator.items() if k != "name")
+            lines.append(f"operator: {self.operator.get('name', '?')}" + (f" ({rest})" if rest else ""))
         if self.channel:
             unmatched = self.channel.get("unmatched") or {}
             lines.append(f"channel: {self.channel.get('labels', 0)} labels, {self.channel.get('matched', 0)} matched"

@@ -287,6 +287,11 @@ class BaseOperator:
         """Retract an event exactly (cascading to corroborating events within T_cor)."""
         return graph.provenance.retract(event_id, cascade_window=self.config.t_cor)
 
+    def merge_nodes(self, graph: SceneGraph, keep: Any, absorb: Any) -> None:
+        """Merge element ``absorb`` into ``keep`` (``graph.merge_nodes``: provenance and beliefs
+        move, every entry counted once). The baselines keep nothing per element besides the graph."""
+        graph.merge_nodes(keep, absorb)
+
     def confirm(self, graph: SceneGraph, event_id: str, *, accept: bool = True) -> list[QueueResolution]:
         """Explicit operator confirmation of a queued (quarantined or refused) event."""
         out = queues.confirm(graph.provenance, event_id, accept=accept, t=max(graph.clock, 0))

@@ -104,10 +104,8 @@ class CalibratedOperator(BaseOperator):
         self._consensus: dict[int, tuple[ProvenanceStore, MapConsensus]] = {}
         #: freeze_calibration() also stops the consensus' refits
         self._consensus_frozen = False
-        #: the exclusive classes of the vocabulary (the consensus' latent classes), when it is on
-        self.consensus_classes: frozenset[str] = frozenset()
-        if cfg.calibration.consensus.method != "none" and self.vocabulary is not None:
-            self.consensus_classes = self.vocabulary.exclusive_predicates()
+        # the vocabulary whose exclusive classes ``consensus_classes`` holds (see there)
+        self._classes_of: tuple[SubsumptionTable | None, frozenset[str]] | None = None
 
     @classmethod
     def _settings(cls, config: OperatorConfig) -> OperatorConfig:
@@ -124,6 +122,19 @@ class CalibratedOperator(BaseOperator):
     def observes_label(self) -> bool:
         """A decisive geometric label also observes the predicates it asserts (``geometric_evidence: label``)."""
         return self.check_compatibility and self.config.geometric_evidence == "label"
+
+    @property
+    def consensus_classes(self) -> frozenset[str]:
+        """The exclusive classes of the operator's vocabulary (the consensus' latent classes), when
+        the consensus is on; empty otherwise. Follows the vocabulary: a backend that learns its class
+        list after building the operator sets ``operator.vocabulary`` then, and the consensus runs
+        from the next claim on."""
+        vocab = self.vocabulary
+        held = self._classes_of
+        if held is None or held[0] is not vocab:
+            on = self.config.calibration.consensus.method != "none" and vocab is not None
+            held = self._classes_of = (vocab, vocab.exclusive_predicates() if on else frozenset())  # type: ignore[union-attr]
+        return held[1]
 
     @property
     def excludes_rivals(self) -> bool:
@@ -261,7 +272,8 @@ class CalibratedOperator(BaseOperator):
     def _consensus_of(self, prov: ProvenanceStore) -> MapConsensus:
         """The consensus of one provenance store (created on first use)."""
         held = self._consensus.get(id(prov))
-        if held is None or held[0] is not prov:
+        if held is None or held[0] is not prov or held[1].exclusive is not self.consensus_classes:
+            # (a new vocabulary starts a new consensus: its latent classes are the vocabulary's)
             held = self._consensus[id(prov)] = (prov, MapConsensus(self.config.calibration, self.consensus_classes,
                                                                       self.vocabulary.asserted_tables()))  # type: ignore[union-attr]
             held[1].frozen = self._consensus_frozen
@@ -403,6 +415,30 @@ class CalibratedOperator(BaseOperator):
         self._consensus_frozen = True
         for _prov, consensus in self._consensus.values():
             consensus.frozen = True
+
+    def merge_nodes(self, graph: SceneGraph, keep: Any, absorb: Any) -> None:
+        """Merge ``absorb`` into ``keep``: the graph's merge, plus the per-element state: the claim
+        counts (the support stratum of keep's next claim counts absorb's claims too), the label
+        observations' frame marks and the consensus' claim table."""
+        if keep == absorb:
+            return
+        prov = graph.provenance
+        preds = list(graph.beliefs(absorb)) if absorb in graph else []
+        graph.merge_nodes(keep, absorb)
+        held = self._claims.get(id(prov))
+        if held is not None and held[0] is prov:
+            for pred in preds:  # recounted from the merged log at keep's next claim
+                held[1].pop((absorb, pred), None)
+                held[1].pop((keep, pred), None)
+        seen = self._label_seen.get(id(prov))
+        if seen is not None and seen[0] is prov:
+            for pred in preds:
+                t = seen[1].pop((absorb, pred), None)
+                if t is not None and t > seen[1].get((keep, pred), -1):
+                    seen[1][(keep, pred)] = t
+        cons = self._consensus.get(id(prov))
+        if cons is not None and cons[0] is prov:
+            cons[1].merge_elements(keep, absorb)
 
     def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
         """Retract an event exactly (cascading within T_cor); the retracted claims no longer count
