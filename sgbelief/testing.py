@@ -90,7 +90,7 @@ def check_fusion_operator(operator: FusionOperator, *, n_events: int = 300, seed
     docstring). ``operator`` must be fresh (no event applied yet); it is used, copies of it too."""
     assert isinstance(operator, FusionOperator), (
         f"{operator!r} does not implement FusionOperator (name, config, stats, pair_rule, update, "
-        f"update_many, tick, probability, retract)"
+        f"update_many, tick, probability, retract, merge_nodes)"
     )
     assert isinstance(operator.name, str) and operator.name, "operator.name must be a non-empty string"
     missing = [k for k in STAT_KEYS if k not in operator.stats]

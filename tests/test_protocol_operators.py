@@ -55,6 +55,9 @@ class ProtocolOnly:
     def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
         return self.inner.retract(graph, event_id)
 
+    def merge_nodes(self, graph: SceneGraph, keep: Any, absorb: Any) -> None:
+        self.inner.merge_nodes(graph, keep, absorb)
+
 
 def _wrapped(name: str) -> Any:
     """A registry factory: the shipped operator ``name`` (fast engine) behind :class:`ProtocolOnly`."""
