@@ -150,6 +150,33 @@ def test_without_abstention_the_most_probable_claimed_class_is_written():
     assert labels == {True: None, False: "is_sofa"}
 
 
+@pytest.mark.parametrize("order", ["stools_first", "chairs_first", "interleaved"])
+def test_the_label_weighs_each_class_against_its_exclusive_rivals(order):
+    """Four stool claims at 0.7 and two chair claims at 0.95, no channel, cold start: both commit
+    and the independent means rank chair first (a Beta's mean is its claims' average confidence,
+    whatever their number). Ranked by rules.exclusive_marginal (each class's mass against its
+    rival's), stool comes first, in any order of arrival; a baseline keeps its own probability."""
+    names = ["chair", "stool", "sofa"]
+    stools, chairs = [("stool", 0.7)] * 4, [("chair", 0.95)] * 2
+    claims = {"stools_first": stools + chairs, "chairs_first": chairs + stools,
+              "interleaved": [stools[0], chairs[0], stools[1], chairs[1], stools[2], stools[3]]}[order]
+
+    def run(operator):
+        backend = ConceptGraphsBackend(operator, class_names=names, print_summary=False)
+        backend.graph.add_node("v")
+        for t, (name, c) in enumerate(claims):
+            backend.route_detection(make_detection(blob((0, 0, 0)), names.index(name), name, c, t), {"v": 1.0})
+        return backend
+
+    comod = run("comod")
+    means = {k: b.mean for k, b in comod.graph.beliefs("v").items()}
+    assert min(means.values()) > 0.5 and means["is_chair"] > means["is_stool"]
+    assert comod.committed_predicate("v") == "is_stool"
+    nb = run("naive_bayes")
+    p = {k: nb.graph.probability("v", k) for k in ("is_chair", "is_stool")}
+    assert nb.committed_predicate("v") == max(p, key=p.get)
+
+
 def test_the_backend_keeps_exclusive_classes_apart_unless_configured():
     assert ConceptGraphsBackend("comod", print_summary=False).operator.config.exclusive_evidence == "none"
     on = ConceptGraphsBackend("comod", operator_config={"exclusive_evidence": "rivals"}, print_summary=False)

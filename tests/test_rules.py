@@ -8,6 +8,7 @@ import pytest
 from scipy.special import betaln, digamma
 
 from sgbelief.fusion.compatibility import Verdict
+from sgbelief.fusion import rules
 from sgbelief.fusion.rules import (
     calibrated_log_lr,
     claim_asserts,
@@ -77,3 +78,14 @@ def test_revision_test_is_the_exact_kl(a: float, b: float, da: float, db: float)
         assert revision_kl_exceeds(a, b, da, db, tau) == (kl > tau)
     # hand value: KL(Beta(1, 1) || Beta(2, 1)) = ln B(2, 1) - ln B(1, 1) - psi(1) + psi(2) = ln(1/2) + 1
     assert _kl(1, 1, 1, 0) == pytest.approx(math.log(0.5) + 1.0)
+
+
+def test_exclusive_marginal_by_hand() -> None:
+    """Beta(a, b + the rivals' alpha above the prior): stool with Beta(4, 2) (four claims at 0.75,
+    unit weight), chair with Beta(2.7, 1.3) (two at 0.85), prior alpha 1. Independent means rank
+    chair first (0.675 > 0.667); the coupled ones stool (4 / 7.7 = 0.519 > 2.7 / 7 = 0.386)."""
+    stool = rules.exclusive_marginal(4.0, 2.0, [2.7], 1.0)
+    chair = rules.exclusive_marginal(2.7, 1.3, [4.0], 1.0)
+    assert stool == pytest.approx((4.0, 3.7)) and chair == pytest.approx((2.7, 4.3))
+    assert 2.7 / 4.0 > 4.0 / 6.0 and stool[0] / sum(stool) > chair[0] / sum(chair)
+    assert rules.exclusive_marginal(2.0, 1.0, [], 1.0) == (2.0, 1.0)

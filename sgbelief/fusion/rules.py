@@ -19,6 +19,7 @@ increments (Eq. 3)          :func:`claim_increments`
 Eq. 3 inverted (Λ̂, w)      :func:`claim_lambda_hat`, :func:`claim_weight`
 geometric observation       :func:`verification_increments`
 a rival class's claim       :func:`exclusion_increments`
+one class among rivals      :func:`exclusive_marginal`
 label's own predicates      :func:`label_observations`
 revision test (KL > tau)    :func:`revision_kl_exceeds` (bound: :func:`kl_upper_bound`)
 ==========================  ==========================================================
@@ -27,6 +28,7 @@ revision test (KL > tau)    :func:`revision_kl_exceeds` (bound: :func:`kl_upper_
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 from scipy import special as _sp
 
@@ -52,6 +54,7 @@ __all__ = [
     "claim_weight",
     "verification_increments",
     "exclusion_increments",
+    "exclusive_marginal",
     "label_observations",
     "kl_upper_bound",
     "revision_kl_exceeds",
@@ -214,6 +217,26 @@ def exclusion_increments(d_alpha: float) -> tuple[float, float]:
     claim committed at its own pair (a refused or quarantined claim moves nothing, here either).
     """
     return 0.0, d_alpha
+
+
+def exclusive_marginal(alpha: float, beta: float, rival_alphas: Iterable[float], prior_alpha: float) -> tuple[float, float]:
+    """The belief in phi when its exclusive rivals' evidence counts against it, whatever the order.
+
+    :func:`exclusion_increments` is the same coupling applied as claims arrive; here it is applied
+    when one class among exclusive ones is read out, from the per-pair Betas alone: each rival
+    psi's mass on itself, alpha_psi - alpha_0 (its claims' d_alpha and its positive observations),
+    is mass on "not phi"::
+
+        B_excl(v, phi) = Beta(alpha_phi, beta_phi + sum over rivals psi at v of (alpha_psi - alpha_0))
+
+    Order-free (every rival claim counts, made before or after phi's first claim) and a function
+    of Eq. 4's beliefs, so retraction and reconstruction hold without entries of its own. Comparing
+    its means ranks the classes by their own evidence against everything said against them: an
+    element claimed four times as stool and twice as chair is a stool, whatever the confidences of
+    the two chair claims. Meant for operators that do not write the coupling themselves
+    (``exclusive_evidence: none``); with ``rivals`` part of that mass is in beta_phi already.
+    """
+    return alpha, beta + sum(a - prior_alpha for a in rival_alphas)
 
 
 def label_observations(asserted: tuple[str, ...], claimed: str, node: object, t: int,

@@ -15,6 +15,8 @@ from typing import Any
 
 from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClassSummary
 from sgbelief.adapters.conceptgraphs.vocab import normalise_class_name
+from sgbelief.fusion.operators.calibrated import CalibratedOperator
+from sgbelief.fusion.rules import exclusive_marginal
 
 __all__ = ["LabelReader"]
 
@@ -84,9 +86,17 @@ class LabelReader:
         contradictions. The probability is the operator's (``FusionOperator.probability``), for
         every operator.
 
+        Among several committed predicates, exclusive classes are ranked by
+        :func:`~sgbelief.fusion.rules.exclusive_marginal` (each class's evidence against its
+        rivals' evidence, whatever the order the claims came in), unless the operator couples
+        them itself (``exclusive_evidence: rivals``) or has no Beta beliefs to couple: then by
+        probability. Under independent Betas the mean of a class is the average calibrated
+        reliability of its claims, whatever their number: an object claimed four times as stool
+        and twice as chair would come out chair when the two chair claims were the more confident.
+
         When nothing commits and ``abstain`` is off, the object still gets the claimed class of
-        highest probability (the most probable of its exclusive classes: the Bayes choice when
-        every object must carry one label), unless two classes tie."""
+        highest probability (ranked the same way: the Bayes choice when every object must carry
+        one label), unless two classes tie."""
         self.flush()
         claimed = sorted(self._predicates_of(node))
         best = self._best_committed(claimed, node)
@@ -99,22 +109,48 @@ class LabelReader:
         return best
 
     def _most_probable(self, preds: Iterable[str], node: Any) -> str | None:
-        """The predicate of strictly highest probability among ``preds`` (None on a tie or none)."""
-        probability = self.operator.probability
-        ranked = sorted(((float(probability(self.graph, node, p)), p) for p in preds), reverse=True)
+        """The predicate ranked strictly first among ``preds`` (None on a tie or none)."""
+        rank = self._ranking(node)
+        ranked = sorted(((rank(p), p) for p in preds), reverse=True)
         if not ranked or (len(ranked) > 1 and ranked[0][0] == ranked[1][0]):
             return None
         return ranked[0][1]
 
     def _best_committed(self, preds: Iterable[str], node: Any) -> str | None:
-        best, best_p = None, self.tau
+        """The committed predicate (probability > tau) ranked first (see committed_predicate)."""
         probability = self.operator.probability
-        graph = self.graph
-        for pred in preds:
-            p = float(probability(graph, node, pred))
-            if p > best_p:
-                best, best_p = pred, p
+        graph, tau = self.graph, self.tau
+        committed = [pred for pred in preds if float(probability(graph, node, pred)) > tau]
+        if len(committed) < 2:
+            return committed[0] if committed else None
+        rank = self._ranking(node)
+        best, best_r = None, -1.0
+        for pred in committed:  # ties keep the first in order
+            r = rank(pred)
+            if r > best_r:
+                best, best_r = pred, r
         return best
+
+    def _ranking(self, node: Any) -> Any:
+        """The key that ranks ``node``'s predicates: the mean of
+        :func:`~sgbelief.fusion.rules.exclusive_marginal` over the predicates ``node`` holds, or
+        the operator's probability (see committed_predicate)."""
+        probability, graph = self.operator.probability, self.graph
+        table, op = self.table, self.operator
+        # the method's operators (cal, comod) read the coupling unless they write it; the baselines
+        # and operators written against the protocol keep their own probability
+        if table is None or not isinstance(op, CalibratedOperator) or op.config.exclusive_evidence == "rivals":
+            return lambda pred: float(probability(graph, node, pred))
+        held = {p: (b.alpha, b.beta) for p, b in graph.beliefs(node).items()}
+        prior = graph.provenance.prior_alpha
+        exclusive_with = table.exclusive_with
+
+        def coupled_mean(pred: str) -> float:
+            a, b = held.get(pred, (prior, graph.provenance.prior_beta))
+            a, b = exclusive_marginal(a, b, (held[q][0] for q in exclusive_with(pred) if q in held), prior)
+            return a / (a + b)
+
+        return coupled_mean
 
     def _class_for(self, node: Any, pred: str | None) -> tuple[int | None, str] | None:
         if pred is None:
