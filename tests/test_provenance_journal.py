@@ -134,7 +134,7 @@ def test_the_check_finds_a_store_that_differs() -> None:
     class Sloppy(ProvenanceStore):
         def compact(self, before_t: int) -> int:
             n = super().compact(before_t)
-            for log in self._pairs.values():
+            for log in self.logs().values():
                 if log.entries and log.entries[0].status is EntryStatus.COMPACTED:
                     log.entries[0].d_alpha += 1e-12
             return n
