@@ -313,7 +313,7 @@ class JournalledProvenanceStore(StoreMethods):
         if not all(map(eq, map(chunk.__getitem__, ids), ts)):
             return False  # an id at two times
         chunk.pop(None, None)  # type: ignore[call-overload]
-        if self._built_ids and not self._built_ids.isdisjoint(chunk):  # type: ignore[attr-defined]
+        if self._built_ids and not self._built_ids.isdisjoint(chunk):
             return False
         seen = self._j_id_t
         for eid in seen.keys() & chunk.keys():

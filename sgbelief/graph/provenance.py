@@ -34,7 +34,7 @@ increments as plain tuples and builds objects only when something reads them (pr
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Hashable, Iterable, Mapping, Sequence
+from collections.abc import Hashable, Iterable, KeysView, Mapping, Sequence
 from typing import Any
 
 from sgbelief.errors import RetractionError
@@ -149,7 +149,7 @@ class ProvenanceStore(StoreMethods):
         """Every event id with live entries -> those entries (a copy, in the index's order)."""
         return {eid: event_list(v) for eid, v in self._by_event.items()}
 
-    def indexed_events(self) -> Iterable[str]:
+    def indexed_events(self) -> KeysView[str]:
         """The event ids with live entries (a live read-only set view, for fast membership tests)."""
         return self._by_event.keys()
 
