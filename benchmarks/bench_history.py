@@ -66,7 +66,7 @@ def main() -> int:
            "late_window": [late_idx * w, (late_idx + 1) * w] if len(costs) > late_idx else [(len(costs) - 1) * w, len(costs) * w],
            "ratio_late_over_early": round(late / early, 3),
            "calibration_outcomes_global": cal.n_outcomes() if cal else None,
-           "compacted_entries": g.provenance.n_compacted, "live_entries": len(g.provenance._timeline)}
+           "compacted_entries": g.provenance.n_compacted, "live_entries": len(g.provenance.timeline_view())}
     try:
         import matplotlib
 

@@ -45,7 +45,7 @@ def main() -> int:
     res = {"bench": "memory", "operator": args.operator, "events": i, "pairs": args.pairs, "decisive": args.decisive,
            "seconds": round(time.perf_counter() - t0, 1), "rss_mb_at": marks, "peak_rss_mb": round(peak, 1),
            "rss_growth_after_1M": round(cur / after_1m - 1.0, 4) if after_1m else None,
-           "live_provenance_entries": len(g.provenance._timeline), "pairs_in_store": len(g.provenance),
+           "live_provenance_entries": len(g.provenance.timeline_view()), "pairs_in_store": len(g.provenance),
            "quarantine_len": len(g.provenance.quarantine), "disagreement_len": len(g.provenance.disagreement),
            "calibration_outcomes_global": cal.n_outcomes() if cal else 0}
     print(json.dumps(res) if args.json else json.dumps(res, indent=1))

@@ -45,6 +45,7 @@ from sgbelief.api.scene_graph import SceneGraph
 from sgbelief.errors import RetractionError
 from sgbelief.fusion.operators.base import REFERENCE
 from sgbelief.fusion.protocol import STAT_KEYS, Action, FusionOperator, LinearRule, ResetRule, UpdateReport
+from sgbelief.graph.entry_log import EntryLog
 from sgbelief.graph.provenance import ProvenanceEntry, ProvenanceStore
 
 _LABELS = ("car", "truck", "person", "building", None)
@@ -242,7 +243,7 @@ def entry_state(entry: ProvenanceEntry) -> list[Any]:
                         None if entry.summary is None else entry.summary.to_dict()])
 
 
-def store_state(store: ProvenanceStore) -> dict[str, Any]:
+def store_state(store: EntryLog) -> dict[str, Any]:
     """Everything observable about a provenance store, floats bit for bit and every order kept:
     beliefs and logs, the event index, the compaction timeline, the queues, each pair's pending
     entries, the compacted-id memory and the saved form. Checks on the way that the index, the
@@ -271,7 +272,7 @@ def store_state(store: ProvenanceStore) -> dict[str, Any]:
     }
 
 
-def apply_store_operations(store: ProvenanceStore, operations: Sequence[StoreOperation]) -> list[Any]:
+def apply_store_operations(store: EntryLog, operations: Sequence[StoreOperation]) -> list[Any]:
     """Run calls on a store; returns, per call, what it returned (entries as
     :func:`entry_state`, a RetractionError as its message) and every pair's belief after it
     (beliefs read without building entries). The calls:
@@ -326,7 +327,7 @@ def apply_store_operations(store: ProvenanceStore, operations: Sequence[StoreOpe
 
 
 def check_store_matches_reference(
-    make_store: Callable[..., ProvenanceStore],
+    make_store: Callable[..., EntryLog],
     operations: Sequence[StoreOperation],
     *,
     prior: tuple[float, float] = (1.0, 1.0),

@@ -13,6 +13,7 @@ import sgbelief
 from sgbelief.api.scene_graph import ENGINES, SceneGraph, provenance_store
 from sgbelief.graph import scene_graph as model
 from sgbelief.graph.persistence import graph_to_dict, load_graph, save_graph
+from sgbelief.graph.entry_log import EntryLog
 from sgbelief.graph.provenance import ProvenanceStore
 from sgbelief.query import run_query
 
@@ -73,11 +74,12 @@ def test_conveniences_are_the_free_functions(tmp_path: Path) -> None:
 @pytest.mark.parametrize("engine", ["fast", "reference"])
 def test_engine_chooses_the_provenance_store(engine: str) -> None:
     g = SceneGraph(engine=engine, prior=(2.0, 3.0))  # type: ignore[arg-type]
-    assert isinstance(g.provenance, ProvenanceStore)
+    assert isinstance(g.provenance, EntryLog)  # the journalled store is an EntryLog, not a ProvenanceStore
+    assert isinstance(g.provenance, ProvenanceStore) == (engine == "reference")
     assert (g.provenance.prior_alpha, g.provenance.prior_beta) == (2.0, 3.0)
     g.add_node("a")
     assert g.probability("a", "is_x") == pytest.approx(0.4)
-    assert isinstance(provenance_store(engine), ProvenanceStore)
+    assert isinstance(provenance_store(engine), EntryLog)
 
 
 def test_unknown_engine_is_a_clear_error() -> None:

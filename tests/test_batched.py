@@ -61,8 +61,8 @@ def _assert_same(records: list[EventRecord], name: str, config: dict[str, Any] |
     assert graph.provenance.to_dict() == run.graph.provenance.to_dict()
     assert stats == run.operator.stats
     prov = graph.provenance
-    logged = {id(e) for log in prov._pairs.values() for e in log.entries}
-    assert {id(e) for e in prov._timeline} <= logged  # the index and timeline share the log's objects
+    logged = {id(e) for log in prov.logs().values() for e in log.entries}
+    assert {id(e) for e in prov.compaction_timeline()} <= logged  # the index and timeline share the log's objects
     assert {id(e) for v in prov.event_index().values() for e in v} <= logged
     for key in prov.pairs():  # Eq. 4 still holds (up to the running sums' rounding)
         assert prov.reconstruct(*key) == pytest.approx(prov.alpha_beta(*key), rel=1e-12)
@@ -94,7 +94,7 @@ def test_compacted_id_memory_cut_inside_a_compaction(name: str, remember: int) -
     config = {"t_prov": 5, "tau_t": 0.1}
     records = random_records(11, 2500, n_nodes=60, max_targets=5)
     graph = _assert_same(records, name, config, remember=remember)
-    memory = graph.provenance._compacted_order
+    memory = graph.provenance.compacted_ids()
     if remember < 1000:
         assert len(memory) == remember  # full: the bound cuts inside a compaction's ids
     else:
@@ -127,7 +127,7 @@ def test_repeated_ids_released_again_after_compaction(remember: int) -> None:
     recs = random_records(4, 120, n_nodes=6)
     records = [r._replace(id="xyz"[i % 3], t=3 * i + (i % 2)) for i, r in enumerate(recs)]
     graph = _assert_same(records, "majority", {"t_prov": 2}, remember=remember)
-    memory = graph.provenance._compacted_order
+    memory = graph.provenance.compacted_ids()
     assert len(memory) == remember and (remember < 4 or len(set(memory)) < len(memory))
 
 

@@ -274,7 +274,7 @@ def test_operator_stream_on_a_deferred_load(tmp_path: Path, name: str) -> None:
     timeouts, journaled commits, refusals, compaction): same graph as continuing the original."""
     g = _rich_graph()
     h = load_fast(g.save(tmp_path / "g.npz"))
-    assert h.provenance.deferred and h.provenance.quarantine and not h.provenance._timeline
+    assert h.provenance.deferred and h.provenance.quarantine and not h.provenance.timeline_view()
     start = g.clock + 30  # the first tick expires the pending entries (transitions while deferred)
     for graph in (g, h):
         op = make_operator(name, vocabulary=conformance_table())

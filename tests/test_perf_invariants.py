@@ -20,7 +20,7 @@ def test_provenance_live_entries_bounded_by_compaction_horizon() -> None:
     prov = run.graph.provenance
     last_t = recs[-1].t
     # every live un-compacted entry is younger than two horizons; logs hold <= 1 bucket each
-    assert all(e.t >= last_t - 2 * 20 for e in prov._timeline)
+    assert all(e.t >= last_t - 2 * 20 for e in prov.timeline_view())
     assert prov.n_compacted > 2000
     for key in prov.pairs():
         assert sum(e.status.value == "compacted" for e in prov.entries(*key)) <= 1

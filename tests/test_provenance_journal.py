@@ -134,7 +134,7 @@ def test_the_check_finds_a_store_that_differs() -> None:
     class Sloppy(ProvenanceStore):
         def compact(self, before_t: int) -> int:
             n = super().compact(before_t)
-            for log in self._pairs.values():
+            for log in self.logs().values():
                 if log.entries and log.entries[0].status is EntryStatus.COMPACTED:
                     log.entries[0].d_alpha += 1e-12
             return n
@@ -153,7 +153,7 @@ def test_streaming_compaction_builds_no_entry_objects() -> None:
             prov.commit(node, "is_p", f"e{t}", t, 0.5, 0.25, 1)
         if t % 10 == 0:
             prov.compact(t - 10)
-    assert not prov._timeline  # nothing was materialised
+    assert not prov.timeline_view()  # nothing was materialised
     assert prov.n_compacted == 3 * 80
     assert prov.journal_length == 3 * 20
     for node in _NODES:
@@ -222,7 +222,7 @@ def test_long_stream_with_a_reused_id_matches_reference(vector_fold_min: int) ->
 
 def _journal_state(prov: JournalledProvenanceStore) -> Any:
     return (list(prov._journal), [(k, log.alpha, log.beta, [e.as_tuple() for e in log.entries])
-                                  for k, log in prov._pairs.items()], prov.n_compacted, list(prov._compacted_order))
+                                  for k, log in prov.pair_index().items()], prov.n_compacted, prov.compacted_ids())
 
 
 def test_numpy_fold_leaves_a_log_with_more_than_its_bucket_to_the_loop() -> None:
@@ -232,9 +232,9 @@ def test_numpy_fold_leaves_a_log_with_more_than_its_bucket_to_the_loop() -> None
     ops += [("commit", "a", "is_p", "new", 1, 0.25, 0.5, 1), ("commit", "b", "is_p", "new", 0, 0.5, 0.5, 1)] * 3
     prov = _journalled(1)((1.0, 1.0), remember_compacted=3)
     apply_store_operations(prov, _timed(ops))
-    assert not prov._timeline and prov.journal_length == 6 and len(prov._pairs[("a", "is_p")].entries) == 1
+    assert not prov.timeline_view() and prov.journal_length == 6 and len(prov.pair_index()[("a", "is_p")].entries) == 1
     before = _journal_state(prov)
-    assert fold_journal_records(prov, list(prov._journal)) is None
+    assert fold_journal_records(prov._objects, list(prov._journal)) is None  # the object log, unmaterialised
     assert _journal_state(prov) == before
     check_store_matches_reference(_journalled(1), _timed(ops + [("compact", -5)]), remember_compacted=3)
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from sgbelief._fast.nx_nodes import node_table
 from sgbelief.errors import DuplicateEventError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion.protocol import (
     Action,
@@ -74,9 +75,9 @@ def apply_fused(op: BaseOperator, graph: SceneGraph, items: Items, reports: list
     tau_t = op.config.tau_t
     prov = graph.provenance
     commit = prov.commit
-    pairs_get = prov._pairs.get
+    pairs_get = prov.pair_index().get
     prior_a, prior_b = prov.prior_alpha, prov.prior_beta
-    gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
+    gnx = node_table(graph.nx)  # a membership test without a Python-level __contains__
     has_event = prov.has_event
     create_nodes = graph.create_nodes
     tick = op.tick

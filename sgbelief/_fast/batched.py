@@ -17,8 +17,8 @@ compacted event ids, filled in the order the streaming store fills it (:func:`_r
 Node order, pair order, clock, compaction epoch (the operator's
 :class:`~sgbelief.fusion.operators.compaction.CompactionSchedule`) and operator stats
 (:data:`~sgbelief.fusion.protocol.STAT_KEYS`) match too (tests/test_batched.py compares
-everything, floats bit for bit). All writes into the store's private structures are in
-:func:`_install`.
+everything, floats bit for bit). The store is filled in :func:`_install`, through the builder
+methods of its object log (``prov.object_log()``).
 
 ``cal`` / ``comod`` declare no pair rule: their increments depend on a calibration buffer shared
 by all pairs, which every outcome changes, so events cannot be reordered across pairs.
@@ -48,9 +48,9 @@ from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.operators.compaction import CompactionSchedule
 from sgbelief.fusion.protocol import FusionOperator, LinearRule, PairRule, ResetRule, increment_stance, new_stats
 from sgbelief.fusion.registry import make_reference_operator
-from sgbelief._fast.journal import add_logs, extend_timeline, remember_compacted_ids, set_event_index
 from sgbelief.graph.compaction import FoldSummary, merge_into_bucket
-from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore
+from sgbelief.graph.entry_log import EntryLog
+from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry
 from sgbelief.graph.scene_graph import SceneGraph
 
 
@@ -402,21 +402,21 @@ def _check_fresh(graph: SceneGraph) -> None:
         raise ValueError("batched replay fills an empty graph (no nodes, beliefs, clock or meta yet)")
 
 
-def _install(prov: ProvenanceStore, keys: list[tuple[Any, str]], alpha: list[float], beta: list[float],
+def _install(prov: EntryLog, keys: list[tuple[Any, str]], alpha: list[float], beta: list[float],
              entries: list[list[ProvenanceEntry]], timeline: list[ProvenanceEntry],
              by_event: dict[str, ProvenanceEntry | list[ProvenanceEntry]], compacted_ids: list[str],
              n_compacted: int) -> None:
     """Write the rebuilt store into the (empty) ``prov``: per pair (in order) its (alpha, beta)
     and log entries, the timeline of live entries, the event index, the compacted-id memory and
-    the compacted count. The only place this engine writes the store's private structures."""
-    prov.materialize()
-    logs = add_logs(prov, keys, alpha, beta)
+    the compacted count, through the builder methods of the store's object log (the only place
+    this engine fills the store)."""
+    objects = prov.object_log()
+    logs = objects.add_pairs(keys, alpha, beta)
     for log, pair_entries in zip(logs, entries):
         log.entries = pair_entries
-    extend_timeline(prov, timeline)
-    set_event_index(prov, by_event.items())
-    remember_compacted_ids(prov, compacted_ids)
-    prov.n_compacted = n_compacted
+    objects.extend_timeline(timeline)
+    objects.index_events(by_event.items())
+    objects.retire(compacted_ids, n_compacted)
 
 
 # ------------------------------------------------------------------ replay

@@ -16,6 +16,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from sgbelief._fast.isotonic import IncrementalIsotonic
+from sgbelief._fast.nx_nodes import node_table
 from sgbelief.calibration.conformal import ConformalSlice
 from sgbelief.errors import DuplicateEventError, UnknownNodeError, UnknownPredicateError
 from sgbelief.fusion import queues
@@ -82,10 +83,11 @@ def apply_fused(
     prov = graph.provenance
     append = prov.append
     commit = prov.commit
-    pairs_get = prov._pairs.get
-    pending_map = prov._pending_by_pair  # pairs with entries waiting in Q or Q_bot
+    pairs_get = prov.pair_index().get
+    pending_map = prov.pending_index()  # pairs with entries waiting in Q or Q_bot
     prior_a, prior_b = prov.prior_alpha, prov.prior_beta
-    gnx = graph.nx._node  # the node dict: a membership test without a Python-level __contains__
+    timeline = prov.timeline_view()  # the built entries a compaction scans (live)
+    gnx = node_table(graph.nx)  # a membership test without a Python-level __contains__
     has_event = prov.has_event
     create_nodes = graph.create_nodes
     tables = op.vocabulary.outcome_tables() if op.vocabulary is not None else None
@@ -205,7 +207,7 @@ def apply_fused(
                     for psi in asserted.get(label, ()):
                         if psi != pred and label_seen.get((node, psi)) != t:  # type: ignore[union-attr]
                             label_seen[(node, psi)] = t  # type: ignore[index]
-                            if prov._timeline:
+                            if timeline:
                                 append(EntryRecord(node=node, predicate=psi, event_id=eid, t=t, d_alpha=w0 * mass,
                                                    d_beta=0.0, status=_COMMITTED, stance=1, verdict=_E_GEO,
                                                    confidence=c))
@@ -223,7 +225,7 @@ def apply_fused(
                     if geo:  # the decisive label as one observation of y (rules.verification_increments)
                         gw = w0 * mass
                         ga, gb = (gw, 0.0) if y == 1 else (0.0, gw)
-                        if prov._timeline:
+                        if timeline:
                             append(EntryRecord(node=node, predicate=pred, event_id=eid, t=t, d_alpha=ga, d_beta=gb,
                                                status=_COMMITTED, stance=1 if y == 1 else -1, verdict=_E_GEO,
                                                confidence=c))
@@ -266,7 +268,7 @@ def apply_fused(
                 else:
                     # committed entries go to the journal unless the timeline is live: then the next
                     # refusal or quarantine would materialise the journal anyway
-                    if prov._timeline:
+                    if timeline:
                         append(EntryRecord(node=node, predicate=pred, event_id=eid, t=t, d_alpha=da, d_beta=db,
                                            status=_COMMITTED, stance=stance, verdict=code, confidence=c))
                     else:
@@ -275,7 +277,7 @@ def apply_fused(
                         # rules.exclusion_increments, inlined: d_alpha against each rival class held at v
                         for psi in rivals_of(pred):
                             if pairs_get((node, psi)) is not None:
-                                if prov._timeline:
+                                if timeline:
                                     append(EntryRecord(node=node, predicate=psi, event_id=eid, t=t, d_alpha=0.0,
                                                        d_beta=da, status=_COMMITTED, stance=-1, verdict=_E_EXCL,
                                                        confidence=c))

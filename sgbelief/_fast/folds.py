@@ -1,11 +1,13 @@
 """Private: the compaction kernel behind the reference fold of :mod:`sgbelief.graph.compaction`.
 
-The reference pass (:meth:`sgbelief.graph.provenance.ProvenanceStore.compact`, with the fold of
-:mod:`sgbelief.graph.compaction`) folds entry objects. A journalled store (:mod:`sgbelief._fast.journal`) also holds committed increments as
-plain tuples (journal records); when a pass may fold them as they stand (the store checks that,
-``old_journal``), these functions fold them straight into the pairs' compacted buckets and give,
-bit for bit and in every observable order, what materialising them first and running the
-reference pass would:
+The reference pass (:func:`sgbelief.graph.compaction.fold_pass`) folds entry objects. A
+journalled store (:mod:`sgbelief._fast.journal`) also holds committed increments as plain tuples
+(journal records); when a pass may fold them as they stand (the store checks that,
+``old_journal``), its ``fold`` calls these functions, which fold them straight into the pairs'
+compacted buckets of its object log (through the same operations as the reference pass,
+:class:`~sgbelief.graph.compaction.FoldTarget`) and give, bit for bit and in every observable
+order, what materialising them first and running the reference pass would (the caller then
+drops the folded records from its journal):
 
 - :func:`fold_with_journal`: the old timeline entries and the old journal records, pair by
   pair, in the reference's pair order, with one ``math.fsum`` per pair over both;
@@ -21,7 +23,7 @@ Each pair's sum goes into its bucket with the reference's
 from __future__ import annotations
 
 import math
-from collections import Counter, deque
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from itertools import chain
 from operator import itemgetter
@@ -29,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from sgbelief.graph.compaction import FoldSummary, lambda_hat_sum, merge_into_bucket, settled_before
+from sgbelief.graph.compaction import FoldSummary, FoldTarget, lambda_hat_sum, merge_into_bucket, settled_before
 from sgbelief.graph.provenance import COUNTED, EntryStatus, EntryVerdict, PairKey, PairLog, ProvenanceEntry
 from sgbelief.graph.provenance_log import VERDICT_SYMBOLS, claim_lambda_hat
 
@@ -120,17 +122,11 @@ def _records_lambda_hats(recs: Sequence[JournalRecord], summary: FoldSummary) ->
     return lams
 
 
-def fold_with_journal(store: Any, before_t: int, n_old: int, raws: list[JournalRecord]) -> int:
-    """One compaction pass over the timeline's first ``n_old`` entries and the old journal
-    records ``raws`` (a prefix of the journal, all after the timeline in arrival order);
+def fold_with_journal(store: FoldTarget, before_t: int, n_old: int, raws: list[JournalRecord]) -> int:
+    """One compaction pass over the object log's first ``n_old`` timeline entries and the old
+    journal records ``raws`` (a prefix of the journal, all after the timeline in arrival order);
     returns the number of entries folded."""
-    timeline: deque[ProvenanceEntry] = store._timeline
-    if n_old == len(timeline):
-        old = list(timeline)
-        timeline.clear()
-    else:
-        popleft = timeline.popleft
-        old = [popleft() for _ in range(n_old)]
+    old = store.pop_timeline(n_old)
     # the old journal records by pair, in the order each pair's first record arrived
     groups: dict[PairKey, list[JournalRecord]] = {}
     group_of = groups.get
@@ -143,8 +139,8 @@ def fold_with_journal(store: Any, before_t: int, n_old: int, raws: list[JournalR
     # pairs in the order their oldest entry past the horizon arrived (journal records arrived
     # after every timeline entry)
     dirty = dict.fromkeys(chain([(e.node, e.predicate) for e in old if e.alive], groups))
-    pairs_get = store._pairs.get
-    unindex = store._unindex
+    pairs_get = store.pair_index().get
+    fold_pair = store.fold_pair
     # the ids the folded entries took out of the event index, in order, and per pair with
     # journal records: how many of those ids came before its records, and the records (their
     # ids are gone with the last of their records)
@@ -214,27 +210,17 @@ def fold_with_journal(store: Any, before_t: int, n_old: int, raws: list[JournalR
         else:
             summary = FoldSummary.of_entries(fold)
         bucket = merge_into_bucket(bucket, key[0], key[1], t_max, d_alpha, d_beta, n, summary)
-        for entry in fold:
-            entry.alive = False
-            if unindex(entry):
-                gone.append(entry.event_id)  # type: ignore[arg-type]
+        gone += fold_pair(log, bucket, fold, keep)
         if recs:
             marks.append((len(gone), recs))
-        if keep is not None:
-            keep.insert(0, bucket)
-            log.entries = keep
         folded_total += n_fold
-    gone = retired_ids(gone, marks, raws, all_recs_seen)
-    store.drop_folded_records(len(raws))
-    store.n_compacted += folded_total
-    if gone:
-        store._compacted_order.extend(gone)
+    store.retire(retired_ids(gone, marks, raws, all_recs_seen), folded_total)
     return folded_total
 
 
-def fold_journal_records(store: Any, raws: list[JournalRecord]) -> int | None:
-    """A compaction pass over journal records alone (the timeline is empty), grouped by pair in
-    numpy instead of record by record; returns the number folded.
+def fold_journal_records(store: FoldTarget, raws: list[JournalRecord]) -> int | None:
+    """A compaction pass over journal records alone (the object log's timeline is empty),
+    grouped by pair in numpy instead of record by record; returns the number folded.
 
     The result is the loop's, bit for bit: pairs in the order of their first record; per pair
     one ``math.fsum`` of its increments (for one value that is the value + 0.0, for two their
@@ -315,13 +301,9 @@ def fold_journal_records(store: Any, raws: list[JournalRecord]) -> int | None:
         bucket = merge_into_bucket(entries[0] if entries else None, key[0], key[1], t_max, d_alpha, d_beta, c,
                                    summary)
         if not entries:
-            log.entries = [bucket]  # type: ignore[union-attr]
+            store.fold_pair(log, bucket, (), [])  # type: ignore[arg-type]  # the new bucket is the log
     eids = list(map(record_event_id, raws))
-    gone = last_seen_order(eids if order is None else map(eids.__getitem__, order.tolist()))
-    store.drop_folded_records(m)
-    store.n_compacted += m
-    if gone:
-        store._compacted_order.extend(gone)
+    store.retire(last_seen_order(eids if order is None else map(eids.__getitem__, order.tolist())), m)
     return m
 
 

@@ -1,46 +1,45 @@
 """The journalled provenance store: the reference store's behaviour, built lazily.
 
-:class:`JournalledProvenanceStore` is a :class:`~sgbelief.graph.provenance.ProvenanceStore` whose
-``commit`` (the operators' hot path) updates the belief at once and appends a plain tuple to a
-journal; the entry object, the event index and the timeline are built only when something reads
-or changes entries (every such method materialises the journal first, in arrival order, so every
-observable order is the one ``record`` would have produced). A compaction pass folds journal
-records older than the horizon straight into the compacted buckets (:mod:`sgbelief._fast.folds`),
-so a streaming replay never builds objects for entries nobody looks at.
+:class:`JournalledProvenanceStore` implements :class:`~sgbelief.graph.entry_log.EntryLog` on its
+own, by composition: it holds an object-backed :class:`~sgbelief.graph.provenance.ProvenanceStore`
+(its *object log*) for every entry that exists as an object, and a journal of plain tuples for
+committed increments not built yet. ``commit`` (the operators' hot path) updates the pair's
+running belief at once and appends a tuple to the journal; the entry objects, the event index
+and the timeline are built only when something reads or changes entries (every such operation
+materialises the journal first, in arrival order, so every observable order is the one
+``append`` would have produced). A compaction pass folds journal records older than the horizon
+straight into the compacted buckets (:mod:`sgbelief._fast.folds`), so a streaming replay never
+builds objects for entries nobody looks at.
 
 A store loaded from the binary layout defers its settled entries the same way
 (:meth:`JournalledProvenanceStore.defer_entries`): the beliefs, the pending queues and their
 entries exist at once, the other entry objects, the event index and the timeline are built by the
 first materialisation, before any journal record.
-
-The functions at the end are this package's private API for code that fills or reads a store's
-structures in bulk (the batched engine, the binary loader): nothing outside ``sgbelief._fast``
-should call them (``sgbelief.eval.batched`` does until it moves into this package).
 """
 
 from __future__ import annotations
 
 import math
 from bisect import bisect_left
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from itertools import islice
 from operator import eq, le
 from typing import Any, Protocol
 
 from sgbelief._fast.folds import JournalRecord, fold_journal_records, fold_with_journal, record_event_id, record_t
-from sgbelief.graph.compaction import old_prefix_length
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA
+from sgbelief.graph.compaction import fold_pass, old_prefix_length
+from sgbelief.graph.entry_log import PairKey
 from sgbelief.graph.provenance import (
     COUNTED,
     EntryRecord,
     EntryStatus,
     EntryVerdict,
-    PairKey,
     PairLog,
     ProvenanceEntry,
     ProvenanceStore,
-    index_event,
 )
+from sgbelief.graph.store_methods import StoreMethods
 
 #: the journal's first record while a loader's entries are deferred (see defer_entries): every
 #: reader that materialises a non-empty journal then builds them first
@@ -52,16 +51,18 @@ class DeferredEntries(Protocol):
     """Entries a loader builds on demand (see :meth:`JournalledProvenanceStore.defer_entries`)."""
 
     def build(self, store: ProvenanceStore) -> None:
-        """Fill the loaded pairs' entry lists, the event index and the timeline of ``store``."""
+        """Fill the loaded pairs' entry lists, the event index and the timeline of ``store`` (the
+        object log, through its builder methods)."""
 
     def has_event(self, event_id: str) -> bool:
         """Whether a loaded (not yet built) entry carries this event id."""
 
 
-class JournalledProvenanceStore(ProvenanceStore):
-    """:class:`~sgbelief.graph.provenance.ProvenanceStore` with committed increments journaled
-    as tuples and loaded entries deferred; observably the same store (same beliefs, entries,
-    orders, errors and saved form under any sequence of calls)."""
+class JournalledProvenanceStore(StoreMethods):
+    """An :class:`~sgbelief.graph.entry_log.EntryLog` with committed increments journaled as
+    tuples and loaded entries deferred, built into an object log on demand; observably the
+    reference store (same beliefs, entries, orders, errors and saved form under any sequence of
+    calls)."""
 
     #: journal records from which a compaction pass groups them by pair in numpy
     #: (:func:`sgbelief._fast.folds.fold_journal_records`); smaller passes take the loop
@@ -73,7 +74,13 @@ class JournalledProvenanceStore(ProvenanceStore):
         *,
         remember_compacted: int = 100_000,
     ) -> None:
-        super().__init__(prior, remember_compacted=remember_compacted)
+        objects = self._objects = ProvenanceStore(prior, remember_compacted=remember_compacted)
+        self.prior_alpha, self.prior_beta = objects.prior_alpha, objects.prior_beta
+        # the object log's queues and live views (their objects never change)
+        self.quarantine = objects.quarantine
+        self.disagreement = objects.disagreement
+        self._index = objects.pair_index()
+        self._built_ids = objects.indexed_events()
         # committed increments not yet materialised, in arrival order (they come after every
         # entry of the timeline); see commit() and materialize()
         self._journal: list[JournalRecord] = []
@@ -88,6 +95,24 @@ class JournalledProvenanceStore(ProvenanceStore):
         # entries a loader has not built yet (then _journal[0] is DEFERRED); see defer_entries()
         self._deferred: DeferredEntries | None = None
 
+    @property
+    def n_compacted(self) -> int:
+        """Entries folded into compacted buckets so far."""
+        return self._objects.n_compacted
+
+    @n_compacted.setter
+    def n_compacted(self, n: int) -> None:
+        self._objects.n_compacted = n
+
+    @property
+    def remember_compacted(self) -> int:
+        """How many of the most recently compacted event ids are remembered (oldest dropped first)."""
+        return self._objects.remember_compacted
+
+    @remember_compacted.setter
+    def remember_compacted(self, n: int) -> None:
+        self._objects.remember_compacted = n
+
     # ------------------------------------------------------------ the journal
     def commit(
         self, node: Any, predicate: str, event_id: str | None, t: int, d_alpha: float, d_beta: float, stance: int = 0,
@@ -97,18 +122,18 @@ class JournalledProvenanceStore(ProvenanceStore):
         journaled and materialised only when something reads the log, or folded straight into
         its pair's compacted bucket."""
         key = (node, predicate)
-        log = self._pairs.get(key)
+        log = self._index.get(key)
         if log is None:
-            log = self._pairs[key] = PairLog(self.prior_alpha, self.prior_beta)
+            log = self._objects.open_pair(key)
         log.alpha += d_alpha
         log.beta += d_beta
         self._journal.append((key, event_id, t, d_alpha, d_beta, stance, log, verdict, confidence))
         self._j_ids_add(event_id)
 
     def materialize(self) -> None:
-        """Turn the journal into entries (logs, event index, timeline), exactly as ``record`` would
-        have built them. Every method that reads or changes entries calls it first; code that
-        touches the store's private structures must call it too."""
+        """Turn the journal into entries of the object log (logs, event index, timeline), exactly
+        as ``append`` would have built them. Every operation that reads or changes entries calls
+        it first."""
         journal = self._journal
         if not journal:
             return
@@ -119,20 +144,19 @@ class JournalledProvenanceStore(ProvenanceStore):
         if journal[0] is DEFERRED:  # a loader's entries come before every journal record
             deferred, self._deferred = self._deferred, None
             assert deferred is not None
-            deferred.build(self)
+            deferred.build(self._objects)
             del journal[0]
-        by_event = self._by_event
-        tl_append = self._timeline.append
         committed = _COMMITTED
+        built: list[ProvenanceEntry] = []
+        add = built.append
         for key, eid, t, da, db, stance, log, verdict, confidence in journal:
             entry = ProvenanceEntry(eid, t, da, db, committed, key[0], key[1], stance, verdict, confidence)
-            log.entries.append(entry)  # type: ignore[union-attr]
-            if eid is not None:
-                index_event(by_event, eid, entry)
-            tl_append(entry)
+            log.entries.append(entry)  # type: ignore[union-attr]  # already counted in log's belief
+            add(entry)
+        self._objects.attach(built)
 
     def defer_entries(self, deferred: DeferredEntries) -> None:
-        """Let ``deferred.build(store)`` make the loaded entries on the first materialisation.
+        """Let ``deferred.build(object_log)`` make the loaded entries on the first materialisation.
 
         For loaders: the store must already hold every loaded pair (its running belief, an
         empty entry list), the pending queues with their entries, and nothing else; the
@@ -141,7 +165,7 @@ class JournalledProvenanceStore(ProvenanceStore):
         entry objects. Status transitions of pending entries meanwhile act on those objects, and
         commits are journaled after the marker, so the result is the eager load followed by the
         same operations."""
-        if self._journal or self._deferred is not None or self._by_event or self._timeline:
+        if self._journal or self._deferred is not None or self._built_ids or self._objects.timeline_view():
             raise ValueError("defer_entries needs a freshly loaded store (no journal, index or timeline)")
         self._deferred = deferred
         self._journal.append(DEFERRED)
@@ -151,92 +175,106 @@ class JournalledProvenanceStore(ProvenanceStore):
         """Whether loaded entries are still to be built (by the first read of the logs)."""
         return self._deferred is not None
 
-    # ------------------------------------------- reads and writes that see entries
-    def entries(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
+    def object_log(self) -> ProvenanceStore:
+        """The object log, every entry built (materialises the journal)."""
         if self._journal:
             self.materialize()
-        return ProvenanceStore.entries(self, node, predicate)
+        return self._objects
+
+    # ------------------------------------------------------------ read views
+    def alpha_beta(self, node: Any, predicate: str) -> tuple[float, float]:
+        """Current (alpha, beta) of a pair (the prior when it has no entry). O(1), nothing built."""
+        log = self._index.get((node, predicate))
+        if log is None:
+            return self.prior_alpha, self.prior_beta
+        return log.alpha, log.beta
+
+    def pair_index(self) -> Mapping[PairKey, PairLog]:
+        """Every pair's log with its running belief (live, read-only; the entry lists lag behind
+        the journal)."""
+        return self._index
+
+    def logs(self) -> Mapping[PairKey, PairLog]:
+        return self.object_log().logs()
+
+    def entries(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
+        return self.object_log().entries(node, predicate)
 
     def event_entries(self, event_id: str) -> list[ProvenanceEntry]:
-        if self._journal:
-            self.materialize()
-        return ProvenanceStore.event_entries(self, event_id)
+        return self.object_log().event_entries(event_id)
 
     def event_index(self) -> dict[str, list[ProvenanceEntry]]:
-        if self._journal:
-            self.materialize()
-        return ProvenanceStore.event_index(self)
+        return self.object_log().event_index()
 
     def has_event(self, event_id: str) -> bool:
-        if event_id in self._by_event or event_id in self._j_ids:
+        if event_id in self._built_ids or event_id in self._j_ids:
             return True
         deferred = self._deferred
         return deferred is not None and deferred.has_event(event_id)
 
-    def logs(self) -> Mapping[PairKey, PairLog]:
-        if self._journal:
-            self.materialize()
-        return self._pairs
+    def pending(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
+        return self._objects.pending(node, predicate)  # pending entries are never journaled
+
+    def pending_index(self) -> Mapping[PairKey, list[ProvenanceEntry]]:
+        return self._objects.pending_index()
 
     def compaction_timeline(self) -> list[ProvenanceEntry]:
-        if self._journal:
-            self.materialize()
-        return list(self._timeline)
+        return self.object_log().compaction_timeline()
 
-    def count_entries(self, node: Any = None) -> int:
-        if self._journal:
-            self.materialize()
-        return ProvenanceStore.count_entries(self, node)
+    def timeline_view(self) -> Sequence[ProvenanceEntry]:
+        """The built part of the timeline (live, read-only; journal records come after it)."""
+        return self._objects.timeline_view()
 
-    def iter_entries(self) -> Iterator[ProvenanceEntry]:
-        if self._journal:
-            self.materialize()
-        return ProvenanceStore.iter_entries(self)
+    def compacted_ids(self) -> list[str]:
+        return self._objects.compacted_ids()
 
+    def is_compacted(self, event_id: str) -> bool:
+        return self._objects.is_compacted(event_id)
+
+    # ------------------------------------------------------------ writes
     def append(self, record: EntryRecord) -> ProvenanceEntry:
-        if self._journal:  # keep arrival order: journal records come first
-            self.materialize()
-        return ProvenanceStore.append(self, record)
+        return self.object_log().append(record)  # journal records come first (arrival order)
 
     def transition(
         self, entry: ProvenanceEntry, status: EntryStatus, *, scale: float = 1.0, corroborated_by: str | None = None
     ) -> None:
         if self._journal and entry.status in COUNTED and status not in COUNTED:
             self.materialize()  # the belief is recomputed from the whole log
-        ProvenanceStore.transition(self, entry, status, scale=scale, corroborated_by=corroborated_by)
+        self._objects.transition(entry, status, scale=scale, corroborated_by=corroborated_by)
 
-    def retract(self, event_id: str, *, cascade_window: int | None = None) -> list[str]:
-        if self._journal:
-            self.materialize()
-        return ProvenanceStore.retract(self, event_id, cascade_window=cascade_window)
+    def remove(self, entries: Iterable[ProvenanceEntry]) -> None:
+        self.object_log().remove(entries)
 
-    def remove_node(self, node: Any) -> int:
-        if self._journal:
-            self.materialize()
-        return ProvenanceStore.remove_node(self, node)
+    def drop_pair(self, key: PairKey) -> list[ProvenanceEntry]:
+        return self.object_log().drop_pair(key)
 
-    def move_node(self, absorb: Any, keep: Any) -> None:
-        if absorb != keep and self._journal:
-            self.materialize()
-        ProvenanceStore.move_node(self, absorb, keep)
+    def merge_pair(self, src: PairKey, dst: PairKey, entries: Sequence[ProvenanceEntry],
+                   folded: Iterable[ProvenanceEntry] = ()) -> None:
+        self.object_log().merge_pair(src, dst, entries, folded)
 
-    def compact(self, before_t: int) -> int:
-        """:meth:`ProvenanceStore.compact`, folding old journal records without materialising
-        them when that gives exactly what materialising them first would (:meth:`old_journal`)."""
+    def fold(self, before_t: int) -> int:
+        """Compaction's pass (:func:`sgbelief.graph.compaction.fold_pass` on the object log),
+        folding old journal records without materialising them when that gives exactly what
+        materialising them first would (:meth:`old_journal`)."""
+        objects = self._objects
         if not self._journal:
-            return ProvenanceStore.compact(self, before_t)
-        n_old = old_prefix_length(self._timeline, before_t)
-        raws = self.old_journal(before_t, n_old == len(self._timeline))
+            return fold_pass(objects, before_t)
+        timeline = objects.timeline_view()
+        n_old = old_prefix_length(timeline, before_t)
+        raws = self.old_journal(before_t, n_old == len(timeline))
         if raws is None:  # the journal cannot be folded as it stands
             self.materialize()
-            return ProvenanceStore.compact(self, before_t)
+            return fold_pass(objects, before_t)
         if not raws:  # the journal is entirely young: the timeline's pass alone
-            return ProvenanceStore.compact(self, before_t)
+            return fold_pass(objects, before_t)
         if not n_old and len(raws) >= self.vector_fold_min:  # journal records only
-            folded = fold_journal_records(self, raws)
+            folded = fold_journal_records(objects, raws)
             if folded is not None:
+                self.drop_folded_records(len(raws))
                 return folded
-        return fold_with_journal(self, before_t, n_old, raws)
+        folded = fold_with_journal(objects, before_t, n_old, raws)
+        self.drop_folded_records(len(raws))
+        return folded
 
     # ------------------------------------------------ journal checks for compaction
     def old_journal(self, before_t: int, timeline_all_old: bool) -> list[JournalRecord] | None:
@@ -275,7 +313,7 @@ class JournalledProvenanceStore(ProvenanceStore):
         if not all(map(eq, map(chunk.__getitem__, ids), ts)):
             return False  # an id at two times
         chunk.pop(None, None)  # type: ignore[call-overload]
-        if self._by_event and not self._by_event.keys().isdisjoint(chunk):
+        if self._built_ids and not self._built_ids.isdisjoint(chunk):
             return False
         seen = self._j_id_t
         for eid in seen.keys() & chunk.keys():
@@ -304,42 +342,4 @@ class JournalledProvenanceStore(ProvenanceStore):
         return len(self._journal)
 
 
-# ------------------------------------------------------------------------------------
-# The private API of sgbelief._fast for code that fills a store's structures in bulk. The store
-# must be materialised (``store.materialize()``) before any of these is called.
-def add_logs(store: ProvenanceStore, keys: Iterable[PairKey], alphas: Iterable[float],
-             betas: Iterable[float]) -> list[PairLog]:
-    """New logs (running beliefs as given, no entries) for pairs the store does not hold yet,
-    appended in order; returns them, for the caller to fill their ``entries``."""
-    logs = list(map(PairLog, alphas, betas))
-    store._pairs.update(zip(keys, logs))
-    return logs
-
-
-def extend_timeline(store: ProvenanceStore, entries: Iterable[ProvenanceEntry]) -> None:
-    """Append entries (already in their logs) to the compaction timeline, in order."""
-    store._timeline.extend(entries)
-
-
-def set_event_index(store: ProvenanceStore,
-                    items: Iterable[tuple[str, ProvenanceEntry | list[ProvenanceEntry]]]) -> None:
-    """Add event ids to the event index, in order: each with its entry, or the list of its
-    entries when it has several (as :func:`~sgbelief.graph.provenance.index_event` builds them)."""
-    store._by_event.update(items)
-
-
-def remember_compacted_ids(store: ProvenanceStore, ids: Iterable[str]) -> None:
-    """Append ids to the bounded memory of compacted event ids (the oldest drop out)."""
-    store._compacted_order.extend(ids)
-
-
-def index_pending(store: ProvenanceStore, entries: Iterable[ProvenanceEntry]) -> None:
-    """Append pending entries (already in their logs and queues) to their pairs' pending lists, in order."""
-    by_pair = store._pending_by_pair
-    for e in entries:
-        by_pair.setdefault((e.node, e.predicate), []).append(e)
-
-
-def pending_index(store: ProvenanceStore) -> Mapping[PairKey, list[ProvenanceEntry]]:
-    """Each pair with pending entries -> those entries in time order (a live read-only view)."""
-    return store._pending_by_pair
+__all__ = ["DEFERRED", "DeferredEntries", "JournalledProvenanceStore"]

@@ -3,8 +3,7 @@
 :data:`FAST_LOADING` is a :class:`~sgbelief.graph.loading.GraphLoading`: a JSON file's store
 becomes a :class:`~sgbelief._fast.journal.JournalledProvenanceStore`; a binary file's store gets
 its beliefs, queues and pending entries at once, and every other entry object, the event index
-and the timeline on the first read of a log (:class:`DeferredLoad`); nodes go straight into
-networkx's node and adjacency dicts. Pass it to the loaders:
+and the timeline on the first read of a log (:class:`DeferredLoad`). Pass it to the loaders:
 ``sgbelief.graph.persistence.load_graph(path, loading=FAST_LOADING)``.
 """
 
@@ -17,14 +16,8 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
-from sgbelief._fast.journal import (
-    JournalledProvenanceStore,
-    add_logs,
-    extend_timeline,
-    index_pending,
-    remember_compacted_ids,
-    set_event_index,
-)
+from sgbelief._fast.journal import JournalledProvenanceStore
+from sgbelief.graph.entry_log import EntryLog
 from sgbelief.graph.loading import GraphLoading
 from sgbelief.graph.npz_archive import young_collections_only
 from sgbelief.graph.npz_columns import pylist
@@ -52,6 +45,7 @@ class DeferredLoad:
         return event_id in ids
 
     def build(self, store: ProvenanceStore) -> None:
+        """Fill the journalled store's object log (``store``) through its builder methods."""
         with young_collections_only():  # ~10⁶ long-lived objects, as in the load itself
             self._build(store)
 
@@ -62,7 +56,7 @@ class DeferredLoad:
             entries[i] = e
         pick = entries.__getitem__
         # the loaded pairs come first in the store (pairs are only removed after materialising)
-        logs = list(islice(store._pairs.values(), len(cols.lengths)))
+        logs = list(islice(store.pair_index().values(), len(cols.lengths)))
         set_entries = PairLog.entries.__set__  # type: ignore[attr-defined]
         deque(map(set_entries, logs, cols.split(entries)), maxlen=0)
         # event index: each event's entries in log order
@@ -75,15 +69,16 @@ class DeferredLoad:
             by_event = {}
             for eid, e in zip(ev, ents):
                 index_event(by_event, eid, e)
-        set_event_index(store, by_event.items())
-        extend_timeline(store, map(pick, cols.timeline.tolist()))
+        store.index_events(by_event.items())
+        store.extend_timeline(map(pick, cols.timeline.tolist()))
 
 
 def build_deferred_store(cols: ProvenanceColumns) -> JournalledProvenanceStore:
     """The journalled store of checked columns: beliefs, queues and pending entries now, the
     other entries, the event index and the timeline on first read (:class:`DeferredLoad`)."""
     store = JournalledProvenanceStore(cols.prior, remember_compacted=cols.remember_compacted)
-    add_logs(store, cols.pair_keys, pylist(cols.alpha), pylist(cols.beta))
+    objects = store.object_log()  # the builder (empty: nothing to materialise)
+    objects.add_pairs(cols.pair_keys, pylist(cols.alpha), pylist(cols.beta))
     if len(store) != len(cols.pair_keys):
         raise cols.duplicate_pair_error()
     # the pending entries exist at once: the queues hold them (transitions act on these objects)
@@ -93,45 +88,25 @@ def build_deferred_store(cols: ProvenanceColumns) -> JournalledProvenanceStore:
     store.quarantine.extend(map(pick, cols.quarantine.tolist()))
     store.disagreement.extend(map(pick, cols.disagreement.tolist()))
     # per-pair pending lists in time order (stable), as the reference loader builds them
-    index_pending(store, map(pick, pending[np.argsort(cols.t[pending], kind="stable")].tolist()))
-    remember_compacted_ids(store, cols.compacted_ids)  # bounded by remember_compacted: keeps the newest
-    store.n_compacted = cols.n_compacted
+    objects.index_pending(map(pick, pending[np.argsort(cols.t[pending], kind="stable")].tolist()))
+    objects.retire(cols.compacted_ids, cols.n_compacted)  # bounded by remember_compacted: keeps the newest
     if cols.n_entries:
         store.defer_entries(DeferredLoad(cols, built))
     return store
 
 
-def add_nodes_to_dicts(g: nx.MultiDiGraph, ids: list[Any], attrs: list[dict[str, Any]]) -> None:
-    """Insert nodes with their attribute dicts (taken as they are, not copied).
-
-    An empty plain MultiDiGraph is filled through its documented adjacency dicts (``_node``,
-    ``_succ``/``_adj``, ``_pred``) - add_nodes_from copies every dict and is ~4x slower."""
-    plain = (type(g) is nx.MultiDiGraph and len(g) == 0 and g.node_attr_dict_factory is dict
-             and g.adjlist_inner_dict_factory is dict and g._succ is g._adj)
-    if not plain:  # pragma: no cover - SceneGraph always makes a plain MultiDiGraph
-        g.add_nodes_from(zip(ids, attrs))
-        return
-    if any(n is None for n in ids):
-        raise ValueError("None cannot be a node")
-    g._node.update(zip(ids, attrs))
-    g._succ.update(zip(ids, [{} for _ in range(len(ids))]))
-    g._pred.update(zip(ids, [{} for _ in range(len(ids))]))
-    cache = getattr(g, "__networkx_cache__", None)  # what networkx's own mutators clear
-    if cache:
-        cache.clear()
-
-
 class FastLoading:
-    """Journalled stores, binary entries deferred, nodes inserted into networkx's dicts."""
+    """Journalled stores, binary entries deferred; nodes inserted with networkx's public
+    ``add_nodes_from``."""
 
-    def store_from_dict(self, data: dict[str, Any], *, where: str = "provenance") -> ProvenanceStore:
+    def store_from_dict(self, data: dict[str, Any], *, where: str = "provenance") -> EntryLog:
         return JournalledProvenanceStore.from_dict(data, where=where)
 
-    def store_from_columns(self, columns: ProvenanceColumns) -> ProvenanceStore:
+    def store_from_columns(self, columns: ProvenanceColumns) -> EntryLog:
         return build_deferred_store(columns)
 
     def add_nodes(self, g: nx.MultiDiGraph, ids: list[Any], attrs: list[dict[str, Any]]) -> None:
-        add_nodes_to_dicts(g, ids, attrs)
+        g.add_nodes_from(zip(ids, attrs))
 
 
 FAST_LOADING: GraphLoading = FastLoading()

@@ -2,7 +2,7 @@
 
 Two engines are identical when they leave maps with equal signatures: beliefs, logs, queues,
 event index, timeline and compacted-id memory, floats bit for bit and every order that a reader
-can observe. It reads the store's private structures (hence its place here); tests reach it as
+can observe, through the store's read views; tests reach it as
 :func:`sgbelief.testing.provenance_signature`.
 """
 
@@ -39,14 +39,14 @@ def provenance_signature(graph: SceneGraph) -> dict[str, Any]:
         "clock": graph.clock,
         "meta": dict(graph.meta),
         "pairs": [(key, float_bits(log.alpha), float_bits(log.beta), [entry(e) for e in log.entries])
-                  for key, log in prov._pairs.items()],
+                  for key, log in prov.logs().items()],
         "quarantine": [entry(e) for e in prov.quarantine],
         "disagreement": [entry(e) for e in prov.disagreement],
-        "pending_by_pair": {k: [entry(e) for e in v] for k, v in prov._pending_by_pair.items()},
+        "pending_by_pair": {k: [entry(e) for e in v] for k, v in prov.pending_index().items()},
         "by_event": [(k, [entry(e) for e in v]) for k, v in prov.event_index().items()],
-        "timeline": [entry(e) for e in prov._timeline],
-        "compacted_order": list(prov._compacted_order),
-        "compacted_memory_bound": prov._compacted_order.maxlen,
+        "timeline": [entry(e) for e in prov.compaction_timeline()],
+        "compacted_order": prov.compacted_ids(),
+        "compacted_memory_bound": max(prov.remember_compacted, 0),
         "n_compacted": prov.n_compacted,
         "prior": (prov.prior_alpha, prov.prior_beta, prov.remember_compacted),
     }

@@ -24,6 +24,7 @@ from sgbelief._fast.journal import JournalledProvenanceStore
 from sgbelief._fast.loading import FAST_LOADING
 from sgbelief.graph import scene_graph as model
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA
+from sgbelief.graph.entry_log import EntryLog
 from sgbelief.graph.loading import REFERENCE_LOADING, GraphLoading
 from sgbelief.graph.persistence import load_graph, save_graph
 from sgbelief.graph.provenance import ProvenanceStore
@@ -36,7 +37,7 @@ Engine = Literal["fast", "reference"]
 
 #: provenance store per engine (built from the prior): the journalled store of sgbelief._fast, or
 #: the reference log; both observably equal (sgbelief.testing.check_store_matches_reference)
-_PROVENANCE_STORES: dict[str, Callable[[tuple[float, float]], ProvenanceStore]] = {
+_PROVENANCE_STORES: dict[str, Callable[[tuple[float, float]], EntryLog]] = {
     "fast": JournalledProvenanceStore,
     "reference": ProvenanceStore,
 }
@@ -45,7 +46,7 @@ _LOADINGS: dict[str, GraphLoading] = {"fast": FAST_LOADING, "reference": REFEREN
 ENGINES: tuple[str, ...] = tuple(_PROVENANCE_STORES)
 
 
-def provenance_store(engine: str, prior: tuple[float, float] = (PRIOR_ALPHA, PRIOR_BETA)) -> ProvenanceStore:
+def provenance_store(engine: str, prior: tuple[float, float] = (PRIOR_ALPHA, PRIOR_BETA)) -> EntryLog:
     """An empty provenance store of ``engine`` ("fast" or "reference") with Beta ``prior``."""
     try:
         make = _PROVENANCE_STORES[engine]

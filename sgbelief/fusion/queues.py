@@ -20,14 +20,15 @@ from typing import Any
 
 from sgbelief.errors import QueueError
 from sgbelief.fusion.protocol import QueueResolution
-from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore
+from sgbelief.graph.entry_log import EntryLog
+from sgbelief.graph.provenance_log import EntryStatus, ProvenanceEntry
 
 _QUARANTINED = EntryStatus.QUARANTINED
 _REFUSED = EntryStatus.REFUSED
 
 
 def quarantine_feedback(
-    store: ProvenanceStore, node: Any, predicate: str, stance: int, event_id: str, t: int
+    store: EntryLog, node: Any, predicate: str, stance: int, event_id: str, t: int
 ) -> list[QueueResolution]:
     """Let a new event at (v, phi) corroborate or disconfirm the revisions pending there."""
     pending = store.pending(node, predicate)
@@ -46,7 +47,7 @@ def quarantine_feedback(
     return out
 
 
-def resolve_disagreements(store: ProvenanceStore, node: Any, predicate: str, t: int) -> list[QueueResolution]:
+def resolve_disagreements(store: EntryLog, node: Any, predicate: str, t: int) -> list[QueueResolution]:
     """A T verdict at (v, phi): pending ⊥ entries there are resolved (never committed)."""
     out: list[QueueResolution] = []
     for entry in store.pending(node, predicate):
@@ -58,7 +59,7 @@ def resolve_disagreements(store: ProvenanceStore, node: Any, predicate: str, t: 
 
 def _expire(
     queue: deque[ProvenanceEntry], status: EntryStatus, window: int, t: int, new: EntryStatus, scale: float,
-    store: ProvenanceStore, kind: str,
+    store: EntryLog, kind: str,
 ) -> list[QueueResolution]:
     out: list[QueueResolution] = []
     while queue:
@@ -74,7 +75,7 @@ def _expire(
     return out
 
 
-def nothing_expires(store: ProvenanceStore, t: int, *, t_cor: int, t_disagree: int) -> bool:
+def nothing_expires(store: EntryLog, t: int, *, t_cor: int, t_disagree: int) -> bool:
     """True when ``expire`` at time t would change nothing: each queue is empty or its head is
     live, still pending and within its window (checked per tick, so it must be cheap)."""
     q = store.quarantine
@@ -90,7 +91,7 @@ def nothing_expires(store: ProvenanceStore, t: int, *, t_cor: int, t_disagree: i
     return True
 
 
-def expire(store: ProvenanceStore, t: int, *, t_cor: int, k: float, t_disagree: int) -> list[QueueResolution]:
+def expire(store: EntryLog, t: int, *, t_cor: int, k: float, t_disagree: int) -> list[QueueResolution]:
     """Timeouts at time t: revisions older than T_cor are released at w/k, ⊥ entries older than
     T_disagree expire unresolved. Amortised O(1): both queues are in arrival (time) order."""
     out = _expire(store.quarantine, EntryStatus.QUARANTINED, t_cor, t, EntryStatus.RELEASED, 1.0 / k, store, "released")
@@ -98,7 +99,7 @@ def expire(store: ProvenanceStore, t: int, *, t_cor: int, k: float, t_disagree: 
     return out
 
 
-def confirm(store: ProvenanceStore, event_id: str, *, accept: bool = True, t: int = 0) -> list[QueueResolution]:
+def confirm(store: EntryLog, event_id: str, *, accept: bool = True, t: int = 0) -> list[QueueResolution]:
     """Explicit operator decision on a queued event.
 
     A quarantined revision is committed at full weight (``accept``) or discarded. A refused ⊥

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from sgbelief.graph.belief import BetaBelief, beta_kl
+from sgbelief.graph.entry_log import EntryLog
 from sgbelief.graph.provenance import COUNTED, PENDING, EntryStatus, ProvenanceEntry, ProvenanceStore
 from sgbelief.graph.scene_graph import SceneGraph
 
@@ -12,6 +13,7 @@ __all__ = [
     "beta_kl",
     "COUNTED",
     "PENDING",
+    "EntryLog",
     "EntryStatus",
     "ProvenanceEntry",
     "ProvenanceStore",

@@ -50,7 +50,8 @@ from sgbelief.graph.npz_archive import (
 )
 from sgbelief.graph.npz_attributes import RecordsSpec, decode_records, encode_records
 from sgbelief.graph.npz_columns import ColumnSpec, by_address, decode_values, encode_values, json_constant, match_rows
-from sgbelief.graph.npz_provenance import provenance_arrays, read_provenance
+from sgbelief.graph.npz_provenance import read_provenance
+from sgbelief.graph.npz_provenance_save import provenance_arrays
 from sgbelief.graph.provenance import EntryStatus
 from sgbelief.graph.scene_graph import SceneGraph
 

@@ -10,26 +10,31 @@ This module is the reference fold, in one place:
 - :class:`FoldSummary` is what a bucket folded, in bounded memory (counts per status and
   verdict, the Lambda-hat sum of its claims, first and last event ids);
 - :func:`old_prefix_length` / :func:`take_old` give the prefix of the store's arrival-order
-  timeline a pass scans.
+  timeline a pass scans;
+- :func:`compact` is the policy over any :class:`~sgbelief.graph.entry_log.EntryLog` (the store
+  folds, ``log.fold``), and :func:`fold_pass` the reference pass an object-backed store runs, over
+  the few operations of :class:`FoldTarget`.
 
-The store's pass (:meth:`sgbelief.graph.provenance.ProvenanceStore.compact`) runs these. The fast
-kernel behind it (private, :mod:`sgbelief._fast.folds`) folds journal records and numpy groups
-without entry objects and merges each pair's sum with :func:`merge_into_bucket`, bit for bit the
-same (``sgbelief.testing.check_store_matches_reference``).
+The fast kernel behind it (private, :mod:`sgbelief._fast.folds`, run by the journalled store's
+``fold``) folds journal records and numpy groups without entry objects through the same
+:class:`FoldTarget` operations and merges each pair's sum with :func:`merge_into_bucket`, bit
+for bit the same (``sgbelief.testing.check_store_matches_reference``).
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable, Sequence
-from typing import Any
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, Protocol
 
+from sgbelief.graph.entry_log import EntryLog, PairKey
 from sgbelief.graph.provenance_log import (
     COUNTED,
     PENDING,
     VERDICT_SYMBOLS,
     EntryStatus,
+    PairLog,
     ProvenanceEntry,
     entry_lambda_hat,
 )
@@ -304,7 +309,72 @@ def take_old(timeline: deque[ProvenanceEntry], before_t: int) -> list[Provenance
     return old
 
 
+# ------------------------------------------------------------------ the pass
+class FoldTarget(Protocol):
+    """What a compaction pass changes in an object-backed store
+    (:class:`sgbelief.graph.provenance.ProvenanceStore` implements it)."""
+
+    def pair_index(self) -> Mapping[PairKey, PairLog]:
+        """Every pair's log (live, read-only)."""
+
+    def timeline_view(self) -> Sequence[ProvenanceEntry]:
+        """The timeline in arrival order (live, read-only)."""
+
+    def pop_timeline(self, n: int) -> list[ProvenanceEntry]:
+        """Take the timeline's first ``n`` entries (the ones a pass scans)."""
+
+    def fold_pair(self, log: PairLog, bucket: ProvenanceEntry, folded: Iterable[ProvenanceEntry],
+                  keep: list[ProvenanceEntry] | None) -> list[str]:
+        """A pair's log becomes ``[bucket, *keep]`` (``keep`` None: unchanged, the bucket is in
+        place); the folded entries die and leave the event index. Returns the ids that had their
+        last live entry among them, in order."""
+
+    def retire(self, event_ids: Iterable[str], n_folded: int) -> None:
+        """Count ``n_folded`` folded entries and remember the retired ids (the oldest drop out)."""
+
+
+def fold_pass(store: FoldTarget, before_t: int) -> int:
+    """The reference pass: every settled entry with ``t < before_t`` folded into one equivalent
+    increment per pair (:func:`fold_into_bucket`); returns the number of entries folded.
+
+    Pending entries are never folded. Cost is amortised O(1) per entry: only pairs that received
+    entries older than the horizon are visited, in the order their oldest such entry arrived
+    (deterministic: the compacted-id memory fills in that order, each pair's folded entries in log
+    order, an id when its last live entry is folded).
+
+    The timeline is scanned in arrival order up to the first live entry not older than the horizon
+    (:func:`old_prefix_length`): when times go back (replayed or merged logs), entries behind it
+    wait for a later pass. Dead entries (retracted) hold nothing back, so a loaded copy, which no
+    longer holds them, folds the same entries.
+    """
+    old = store.pop_timeline(old_prefix_length(store.timeline_view(), before_t))
+    pairs_get = store.pair_index().get
+    folded = 0
+    retired: list[str] = []
+    for key in dict.fromkeys([(e.node, e.predicate) for e in old if e.alive]):
+        log = pairs_get(key)
+        if log is None:
+            continue
+        bucket, fold, keep = settled_before(log.entries, before_t)
+        if not fold:
+            continue
+        retired += store.fold_pair(log, fold_into_bucket(bucket, fold, key[0], key[1]), fold, keep)
+        folded += len(fold)
+    store.retire(retired, folded)
+    return folded
+
+
+def compact(log: EntryLog, before_t: int) -> int:
+    """Compaction (§4.3) of any store: fold every settled entry with ``t < before_t`` into its
+    pair's compacted bucket, so that Eq. 4 gives the same beliefs; returns the number folded.
+
+    The store folds (``log.fold``): the object-backed store runs :func:`fold_pass`, the journalled
+    one folds its journal records with the kernel of ``sgbelief._fast.folds`` when that gives
+    exactly what :func:`fold_pass` would, and :func:`fold_pass` otherwise."""
+    return log.fold(before_t)
+
+
 __all__ = [
-    "UNKNOWN_STATUS", "FoldSummary", "attach_summary", "bucket_summary", "fold_into_bucket", "lambda_hat_sum",
-    "merge_into_bucket", "old_prefix_length", "settled_before", "take_old",
+    "UNKNOWN_STATUS", "FoldSummary", "FoldTarget", "attach_summary", "bucket_summary", "compact", "fold_into_bucket",
+    "fold_pass", "lambda_hat_sum", "merge_into_bucket", "old_prefix_length", "settled_before", "take_old",
 ]

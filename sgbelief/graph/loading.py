@@ -13,6 +13,7 @@ from typing import Any, Protocol
 
 import networkx as nx
 
+from sgbelief.graph.entry_log import EntryLog
 from sgbelief.graph.npz_provenance import ProvenanceColumns, build_reference_store
 from sgbelief.graph.provenance import ProvenanceStore
 
@@ -20,10 +21,10 @@ from sgbelief.graph.provenance import ProvenanceStore
 class GraphLoading(Protocol):
     """What a loader builds its graph with."""
 
-    def store_from_dict(self, data: dict[str, Any], *, where: str = "provenance") -> ProvenanceStore:
+    def store_from_dict(self, data: dict[str, Any], *, where: str = "provenance") -> EntryLog:
         """The store of a JSON file's ``provenance`` object (checked: Eq. 4 per pair)."""
 
-    def store_from_columns(self, columns: ProvenanceColumns) -> ProvenanceStore:
+    def store_from_columns(self, columns: ProvenanceColumns) -> EntryLog:
         """The store of a binary file's checked provenance columns."""
 
     def add_nodes(self, g: nx.MultiDiGraph, ids: list[Any], attrs: list[dict[str, Any]]) -> None:

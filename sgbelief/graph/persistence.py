@@ -36,6 +36,7 @@ from sgbelief.graph.atomic import atomic_write_binary, atomic_write_text, remove
 from sgbelief.graph.binary import load_graph_npz, save_graph_npz
 from sgbelief.graph.json_values import jsonable, restore_node_attr
 from sgbelief.graph.loading import REFERENCE_LOADING, GraphLoading
+from sgbelief.graph.provenance_json import store_to_dict
 from sgbelief.graph.scene_graph import SceneGraph
 
 FORMAT = "sgbelief.scene_graph"
@@ -114,7 +115,7 @@ def graph_to_dict(graph: SceneGraph) -> dict[str, Any]:
         "clock": graph.clock,
         "meta": jsonable(graph.meta, "meta"),
         "graph": {"directed": True, "multigraph": True, "graph": dict(g.graph), "nodes": nodes, "edges": edges},
-        "provenance": graph.provenance.to_dict(),
+        "provenance": store_to_dict(graph.provenance),
     }
 
 

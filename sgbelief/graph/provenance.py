@@ -1,4 +1,4 @@
-"""Provenance store P (paper §4.3, Eq. 4): an ordered log of increments per (node, predicate).
+"""The reference provenance store P (paper §4.3, Eq. 4): every entry an object from the start.
 
 Every update an operator makes to a belief is an entry ``(event id, t, d_alpha, d_beta, status)``
 in the log of its (node, predicate) pair. The belief is *defined* by the log::
@@ -11,41 +11,42 @@ quarantined entries carry the increments the event *would* contribute but are no
 they sit in the disagreement queue Q⊥ or the revision quarantine Q; those queues are simply the
 pending entries of the store, so they are saved, loaded and migrated with the graph.
 
-Two operations change the log without changing any belief:
+:class:`ProvenanceStore` implements the operations of :class:`~sgbelief.graph.entry_log.EntryLog`
+over entry objects: it keeps a running (alpha, beta) per pair so that reads are O(1), and
+whatever stops counting an increment recomputes the pair's belief from its log with
+``math.fsum``. The policies are free functions over an EntryLog, with thin methods here for the
+public API (:mod:`sgbelief.graph.store_methods`): retraction (:mod:`~sgbelief.graph.retraction`),
+compaction (:mod:`~sgbelief.graph.compaction`, whose :func:`fold_pass` this store's ``fold``
+runs), node migration (:mod:`~sgbelief.graph.migration`), the JSON form
+(:mod:`~sgbelief.graph.provenance_json`) and the queues (:mod:`sgbelief.fusion.queues`).
 
-- retraction (R of §4.3) removes an event's entries, and those of the corroborating events a
-  committed revision depends on, and recomputes the pair's belief from what is left;
-- compaction folds the settled entries older than the horizon T_prov into one ``compacted``
-  entry per pair whose increment is their sum (:func:`fold_into_bucket`), so Eq. 4 still holds.
+The bulk-building methods at the end (``add_pairs``, ``add_logs``, ``index_events``,
+``extend_timeline``, ``index_pending``, ``retire``) are the one builder every loader fills a store
+with: ``from_logs`` (:func:`sgbelief.graph.store_methods.fill_from_logs`), the JSON and binary
+loaders, the deferred binary load, the journal's materialisation (``attach``) and the batched
+engine of ``sgbelief._fast``.
 
-The store keeps a running (alpha, beta) per pair so that reads are O(1); whatever removes a
-counted increment recomputes it from the log with ``math.fsum``.
-
-This module is the reference store: every entry is an object from the moment it is recorded.
 The streaming engines use a store with the same observable behaviour that journals committed
-increments as plain tuples and builds objects only when something reads them (private, in
-``sgbelief._fast``; ``sgbelief.testing.check_store_matches_reference`` proves the two equal).
+increments as plain tuples and builds objects only when something reads them (private,
+``sgbelief._fast.journal``; ``sgbelief.testing.check_store_matches_reference`` proves the two equal).
 """
 
 from __future__ import annotations
 
-import math
 from collections import deque
-from collections.abc import Hashable, Iterable, Iterator, Mapping
-from operator import attrgetter
+from collections.abc import Hashable, Iterable, KeysView, Mapping, Sequence
 from typing import Any
 
-from sgbelief.errors import FormatError, RetractionError
-from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA, BetaBelief
+from sgbelief.errors import RetractionError
+from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA
 from sgbelief.graph.compaction import (
     FoldSummary,
-    attach_summary,
-    bucket_summary,
     fold_into_bucket,
+    fold_pass,
     merge_into_bucket,
     settled_before,
-    take_old,
 )
+from sgbelief.graph.entry_log import EntryLog, PairKey
 from sgbelief.graph.provenance_log import (
     COUNTED,
     PENDING,
@@ -55,30 +56,28 @@ from sgbelief.graph.provenance_log import (
     PairLog,
     ProvenanceEntry,
     belief_from_entries,
-    entry_extras,
-    entry_row,
     event_list,
     index_event,
 )
+from sgbelief.graph.store_methods import StoreMethods
 
 Node = Hashable
-PairKey = tuple[Any, str]
 
 
 __all__ = [
-    "COUNTED", "PENDING", "EntryRecord", "EntryStatus", "EntryVerdict", "FoldSummary", "Node", "PairKey", "PairLog",
-    "ProvenanceEntry", "ProvenanceStore", "belief_from_entries", "event_list", "fold_into_bucket",
+    "COUNTED", "PENDING", "EntryLog", "EntryRecord", "EntryStatus", "EntryVerdict", "FoldSummary", "Node", "PairKey",
+    "PairLog", "ProvenanceEntry", "ProvenanceStore", "belief_from_entries", "event_list", "fold_into_bucket",
     "index_event", "merge_into_bucket", "settled_before"
 ]
 
-_STATUS_BY_VALUE = {s.value: s for s in EntryStatus}
 # members read once (an attribute lookup on an Enum class runs Python code)
 _COMMITTED, _COMPACTED = EntryStatus.COMMITTED, EntryStatus.COMPACTED
 _QUARANTINED, _REFUSED = EntryStatus.QUARANTINED, EntryStatus.REFUSED
 
 
-class ProvenanceStore:
-    """Per-(node, predicate) ordered logs of belief increments, with retraction and compaction.
+class ProvenanceStore(StoreMethods):
+    """Per-(node, predicate) ordered logs of belief increments, every entry an object
+    (:class:`~sgbelief.graph.entry_log.EntryLog`, the reference implementation).
 
     Parameters
     ----------
@@ -120,13 +119,7 @@ class ProvenanceStore:
         # the most recent compacted event ids, oldest first (the bounded deque drops the oldest)
         self._compacted_order = deque(self._compacted_order, maxlen=max(self._remember, 0))
 
-    # ------------------------------------------------------------------ reads
-    def __len__(self) -> int:
-        return len(self._pairs)
-
-    def __contains__(self, key: object) -> bool:
-        return key in self._pairs
-
+    # ------------------------------------------------------------------ read views
     def alpha_beta(self, node: Any, predicate: str) -> tuple[float, float]:
         """Current (alpha, beta) of a pair (the prior when it has no entry). O(1)."""
         log = self._pairs.get((node, predicate))
@@ -134,31 +127,14 @@ class ProvenanceStore:
             return self.prior_alpha, self.prior_beta
         return log.alpha, log.beta
 
-    def belief(self, node: Any, predicate: str) -> BetaBelief:
-        a, b = self.alpha_beta(node, predicate)
-        return BetaBelief(a, b)
+    def pair_index(self) -> Mapping[PairKey, PairLog]:
+        """Every pair's log with its running belief (a live read-only view)."""
+        return self._pairs
 
-    def mean(self, node: Any, predicate: str) -> float:
-        a, b = self.alpha_beta(node, predicate)
-        return a / (a + b)
-
-    def means(self, nodes: Iterable[Any], predicate: str) -> list[float]:
-        """:meth:`mean` of (node, predicate) for each node, in order (the prior mean without evidence)."""
-        get = self._pairs.get
-        prior = self.prior_alpha / (self.prior_alpha + self.prior_beta)
-        out: list[float] = []
-        for node in nodes:
-            log = get((node, predicate))
-            if log is None:
-                out.append(prior)
-            else:
-                a = log.alpha
-                out.append(a / (a + log.beta))
-        return out
-
-    def means_with(self, predicate: str) -> Iterator[tuple[Any, float]]:
-        """(node, :meth:`mean`) for every node with evidence on ``predicate``."""
-        return ((n, log.alpha / (log.alpha + log.beta)) for (n, p), log in self._pairs.items() if p == predicate)
+    def logs(self) -> Mapping[PairKey, PairLog]:
+        """Every pair's log, in the store's pair order (a live read-only view: change the store
+        only through its methods)."""
+        return self._pairs
 
     def entries(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
         """The pair's log in order (a copy of the list; entries are live objects)."""
@@ -173,50 +149,31 @@ class ProvenanceStore:
         """Every event id with live entries -> those entries (a copy, in the index's order)."""
         return {eid: event_list(v) for eid, v in self._by_event.items()}
 
+    def indexed_events(self) -> KeysView[str]:
+        """The event ids with live entries (a live read-only set view, for fast membership tests)."""
+        return self._by_event.keys()
+
     def has_event(self, event_id: str) -> bool:
         return event_id in self._by_event
 
-    def pairs(self) -> Iterator[PairKey]:
-        return iter(self._pairs)
+    def pending(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
+        return list(self._pending_by_pair.get((node, predicate), ()))
 
-    def logs(self) -> Mapping[PairKey, PairLog]:
-        """Every pair's log, in the store's pair order (a live read-only view: change the store
-        only through its methods)."""
-        return self._pairs
+    def pending_index(self) -> Mapping[PairKey, list[ProvenanceEntry]]:
+        """Each pair with pending entries -> those entries in time order (a live read-only view)."""
+        return self._pending_by_pair
 
     def compaction_timeline(self) -> list[ProvenanceEntry]:
         """The entries a compaction pass scans, in arrival order (a copy; dead entries included)."""
         return list(self._timeline)
 
+    def timeline_view(self) -> Sequence[ProvenanceEntry]:
+        """The entries a compaction pass scans, in arrival order (a live read-only view)."""
+        return self._timeline
+
     def compacted_ids(self) -> list[str]:
         """The remembered compacted event ids, oldest first."""
         return list(self._compacted_order)
-
-    def predicates(self) -> set[str]:
-        return {p for _, p in self._pairs}
-
-    def predicates_of(self, node: Any) -> list[str]:
-        return [p for (n, p) in self._pairs if n == node]
-
-    def nodes_with(self, predicate: str) -> Iterator[Any]:
-        return (n for (n, p) in self._pairs if p == predicate)
-
-    def pending(self, node: Any, predicate: str) -> list[ProvenanceEntry]:
-        return list(self._pending_by_pair.get((node, predicate), ()))
-
-    def count_entries(self, node: Any = None) -> int:
-        """Number of original evidence entries (compacted entries count what they folded)."""
-        return sum(
-            e.n_folded for (n, _p), log in self._pairs.items() if node is None or n == node for e in log.entries
-        )
-
-    def reconstruct(self, node: Any, predicate: str) -> tuple[float, float]:
-        """Recompute (alpha, beta) from the log alone (Eq. 4, :func:`belief_from_entries`)."""
-        return belief_from_entries((self.prior_alpha, self.prior_beta), self.entries(node, predicate))
-
-    def iter_entries(self) -> Iterator[ProvenanceEntry]:
-        for log in self._pairs.values():
-            yield from log.entries
 
     def is_compacted(self, event_id: str) -> bool:
         """Whether the id is among the ``remember_compacted`` most recently compacted (O(n) scan)."""
@@ -230,6 +187,10 @@ class ProvenanceStore:
     def deferred(self) -> bool:
         """Whether loaded entries are still to be built (never, for the reference store)."""
         return False
+
+    def object_log(self) -> ProvenanceStore:
+        """This store (its entries are objects already)."""
+        return self
 
     # ------------------------------------------------------------------ writes
     def append(self, record: EntryRecord) -> ProvenanceEntry:
@@ -251,24 +212,6 @@ class ProvenanceStore:
             index_event(self._by_event, event_id, entry)
         self._timeline.append(entry)
         return entry
-
-    def record(
-        self,
-        node: Any,
-        predicate: str,
-        event_id: str | None,
-        t: int,
-        d_alpha: float,
-        d_beta: float,
-        status: EntryStatus = EntryStatus.COMMITTED,
-        stance: int = 0,
-        verdict: EntryVerdict | None = None,
-        confidence: float | None = None,
-    ) -> ProvenanceEntry:
-        """:meth:`append` of the :class:`EntryRecord` with these fields (a shorthand for tests
-        and scripts; library code builds the record by keyword)."""
-        return self.append(EntryRecord(node, predicate, event_id, t, d_alpha, d_beta, status, stance, verdict,
-                                       confidence))
 
     def commit(
         self, node: Any, predicate: str, event_id: str | None, t: int, d_alpha: float, d_beta: float, stance: int = 0,
@@ -312,6 +255,93 @@ class ProvenanceStore:
         if corroborated_by is not None:
             entry.corroborated_by = [*(entry.corroborated_by or ()), corroborated_by]
 
+    def remove(self, entries: Iterable[ProvenanceEntry]) -> None:
+        """Entries leave the store (retraction): out of their logs, the event index and the
+        pending lists (the queues and the timeline drop them lazily); a pair left without
+        entries is dropped, the others' beliefs are recomputed (Eq. 4), in the order first touched."""
+        touched: dict[PairKey, None] = {}
+        pairs = self._pairs
+        for entry in entries:
+            key = (entry.node, entry.predicate)
+            if entry.status in PENDING:
+                self._drop_pending(entry)
+            self._unindex(entry)
+            entry.alive = False
+            pairs[key].entries.remove(entry)
+            touched[key] = None
+        for key in touched:
+            log = pairs[key]
+            if not log.entries:
+                del pairs[key]
+            else:
+                self._refresh(log)
+
+    def drop_pair(self, key: PairKey) -> list[ProvenanceEntry]:
+        """A pair leaves the store with its whole log (node removal); returns its entries."""
+        entries = self._pairs.pop(key).entries
+        for entry in entries:
+            entry.alive = False
+            if entry.status in PENDING:
+                self._drop_pending(entry)
+            self._unindex(entry)
+        return entries
+
+    def merge_pair(self, src: PairKey, dst: PairKey, entries: Sequence[ProvenanceEntry],
+                   folded: Iterable[ProvenanceEntry] = ()) -> None:
+        """``src``'s log joins ``dst``'s (made at the end of the pair order when missing): its
+        entries take ``dst``'s node, ``dst``'s log becomes ``entries`` (the caller's merge of the
+        two; ``folded``: buckets merged into another, which die), ``src``'s pending entries follow
+        ``dst``'s, and the belief is recomputed (Eq. 4)."""
+        moved = self._pairs.pop(src)
+        log = self._pairs.get(dst)
+        if log is None:
+            log = self._pairs[dst] = PairLog(self.prior_alpha, self.prior_beta)
+        for entry in moved.entries:
+            entry.node = dst[0]
+        pend = self._pending_by_pair.pop(src, None)
+        if pend:
+            self._pending_by_pair.setdefault(dst, []).extend(pend)
+        for bucket in folded:
+            bucket.alive = False
+        log.entries = list(entries)
+        self._refresh(log)
+
+    def fold(self, before_t: int) -> int:
+        """Compaction's reference pass over this store (:func:`sgbelief.graph.compaction.fold_pass`)."""
+        return fold_pass(self, before_t)
+
+    # ------------------------------------------------ the fold's operations (compaction.FoldTarget)
+    def pop_timeline(self, n: int) -> list[ProvenanceEntry]:
+        """Take the timeline's first ``n`` entries, in arrival order."""
+        timeline = self._timeline
+        if n == len(timeline):
+            old = list(timeline)
+            timeline.clear()
+            return old
+        popleft = timeline.popleft
+        return [popleft() for _ in range(n)]
+
+    def fold_pair(self, log: PairLog, bucket: ProvenanceEntry, folded: Iterable[ProvenanceEntry],
+                  keep: list[ProvenanceEntry] | None) -> list[str]:
+        """A pair's log becomes ``[bucket, *keep]`` (``keep`` None: unchanged); the folded entries
+        die and leave the event index. Returns the ids whose last live entry they were, in order."""
+        if keep is not None:
+            keep.insert(0, bucket)
+            log.entries = keep
+        gone: list[str] = []
+        unindex = self._unindex
+        for entry in folded:
+            entry.alive = False
+            if unindex(entry):
+                gone.append(entry.event_id)  # type: ignore[arg-type]
+        return gone
+
+    def retire(self, event_ids: Iterable[str], n_folded: int) -> None:
+        """Count folded entries and remember the retired ids (bounded: the oldest drop out)."""
+        self.n_compacted += n_folded
+        self._compacted_order.extend(event_ids)
+
+    # ------------------------------------------------------------------ internals
     def _refresh(self, log: PairLog) -> None:
         """Recompute a pair's running belief from its log (Eq. 4)."""
         log.alpha, log.beta = belief_from_entries((self.prior_alpha, self.prior_beta), log.entries)
@@ -347,260 +377,51 @@ class ProvenanceStore:
                 return True
         return False
 
-    # ------------------------------------------------------------- retraction
-    def _closure(self, event_id: str, cascade_window: int | None) -> list[str]:
-        """The event and, transitively, the corroborating events its revision commits depend on."""
-        order: list[str] = []
-        stack = [event_id]
-        seen: set[str] = set()
-        while stack:
-            eid = stack.pop()
-            if eid in seen:
-                continue
-            seen.add(eid)
-            found = self._by_event.get(eid)
-            if found is None:
-                if eid in self._compacted_order:  # a linear scan, on this error path only
-                    raise RetractionError(
-                        f"event {eid!r} was folded into a compacted increment (older than the provenance "
-                        "horizon T_prov) and can no longer be retracted"
-                    )
-                if eid == event_id:
-                    raise RetractionError(
-                        f"unknown event id {eid!r} (never recorded, already retracted, or compacted "
-                        "beyond the remembered horizon)"
-                    )
-                continue  # a dependent that was already retracted on its own
-            order.append(eid)
-            for entry in event_list(found):
-                for dep in entry.corroborated_by or ():
-                    dep_entries = event_list(self._by_event.get(dep))
-                    if cascade_window is not None and dep_entries:
-                        if all(d.t - entry.t > cascade_window for d in dep_entries):
-                            continue
-                    stack.append(dep)
-        return order
+    # ------------------------------------------------------------------ the builder
+    # Every loader fills a store through these (from_logs, the JSON and binary loaders, the
+    # deferred binary load, the journal's materialisation, the batched engine); each keeps the
+    # store's invariants given what its docstring asks of the caller (``retire`` above too).
+    def open_pair(self, key: PairKey) -> PairLog:
+        """The pair's log, made (prior belief, no entries) at the end of the pair order when missing."""
+        log = self._pairs.get(key)
+        if log is None:
+            log = self._pairs[key] = PairLog(self.prior_alpha, self.prior_beta)
+        return log
 
-    def retract(self, event_id: str, *, cascade_window: int | None = None) -> list[str]:
-        """Remove an event's increments exactly (R of §4.3) and return the retracted event ids.
+    def add_pairs(self, keys: Iterable[PairKey], alphas: Iterable[float], betas: Iterable[float]) -> list[PairLog]:
+        """New logs (running beliefs as given, no entries) for pairs the store does not hold yet,
+        appended in order; returns them, for the caller to fill their ``entries``."""
+        logs = list(map(PairLog, alphas, betas))
+        self._pairs.update(zip(keys, logs))
+        return logs
 
-        For a revision committed via corroboration, the corroborating events it depends on are
-        retracted too (cascade bounded by ``cascade_window`` = T_cor when given). The whole
-        cascade is checked before anything changes, so a failed retraction leaves the store
-        untouched.
-        """
-        ids = self._closure(event_id, cascade_window)
-        touched: dict[PairKey, None] = {}
-        for eid in ids:
-            for entry in event_list(self._by_event.pop(eid)):
-                key = (entry.node, entry.predicate)
-                if entry.status in PENDING:
-                    self._drop_pending(entry)
-                entry.alive = False
-                self._pairs[key].entries.remove(entry)
-                touched[key] = None
-        for key in touched:
-            log = self._pairs[key]
-            if not log.entries:
-                del self._pairs[key]
-            else:
-                self._refresh(log)
-        return ids
+    def add_logs(self, logs: Mapping[PairKey, PairLog]) -> None:
+        """Loaded logs (entries and running beliefs agreeing with Eq. 4) of pairs the store does
+        not hold yet, appended in order; index their entries with the methods below."""
+        self._pairs.update(logs)
 
-    # ------------------------------------------------------------- compaction
-    def compact(self, before_t: int) -> int:
-        """Fold every settled entry with ``t < before_t`` into one equivalent increment per pair
-        (:func:`fold_into_bucket`); returns the number of entries folded.
+    def attach(self, entries: Iterable[ProvenanceEntry]) -> None:
+        """Index entries already in their pairs' logs and counted in their beliefs (committed
+        ones), in arrival order: the event index and the timeline (a journal's materialisation)."""
+        entries = list(entries)
+        by_event = self._by_event
+        for entry in entries:
+            eid = entry.event_id
+            if eid is not None:
+                index_event(by_event, eid, entry)
+        self._timeline.extend(entries)
 
-        Pending entries are never folded. Cost is amortised O(1) per entry: only pairs that
-        received entries older than the horizon are visited, in the order their oldest such
-        entry arrived (deterministic: the compacted-id memory fills in that order, each pair's
-        folded entries in log order, an id when its last live entry is folded).
+    def index_events(self, items: Iterable[tuple[str, ProvenanceEntry | list[ProvenanceEntry]]]) -> None:
+        """Add event ids to the event index, in order: each with its entry, or the list of its
+        entries when it has several (as :func:`index_event` builds them)."""
+        self._by_event.update(items)
 
-        The timeline is scanned in arrival order up to the first live entry not older than the
-        horizon: when times go back (replayed or merged logs), entries behind it wait for a later
-        pass. Dead entries (retracted) hold nothing back, so a loaded copy, which no longer holds
-        them, folds the same entries.
-        """
-        old = take_old(self._timeline, before_t)
-        folded = 0
-        retired: list[str] = []
-        for key in dict.fromkeys([(e.node, e.predicate) for e in old if e.alive]):
-            log = self._pairs.get(key)
-            if log is None:
-                continue
-            bucket, fold, keep = settled_before(log.entries, before_t)
-            if not fold:
-                continue
-            log.entries = [fold_into_bucket(bucket, fold, key[0], key[1]), *keep]
-            for entry in fold:
-                entry.alive = False
-                if self._unindex(entry):
-                    retired.append(entry.event_id)  # type: ignore[arg-type]
-            folded += len(fold)
-        self.n_compacted += folded
-        self._compacted_order.extend(retired)
-        return folded
+    def extend_timeline(self, entries: Iterable[ProvenanceEntry]) -> None:
+        """Append entries (already in their logs) to the compaction timeline, in order."""
+        self._timeline.extend(entries)
 
-    # -------------------------------------------------------- node life cycle
-    def remove_node(self, node: Any) -> int:
-        """Drop every log of a node (its beliefs go back to the prior). Returns entries dropped."""
-        dropped = 0
-        for key in [k for k in self._pairs if k[0] == node]:
-            for entry in self._pairs.pop(key).entries:
-                entry.alive = False
-                dropped += entry.n_folded
-                if entry.status in PENDING:
-                    self._drop_pending(entry)
-                self._unindex(entry)
-        return dropped
-
-    def move_node(self, absorb: Any, keep: Any) -> None:
-        """Belief migration: every log of ``absorb`` merges into the same predicate's log of ``keep``.
-
-        Entries keep their increments and statuses; logs are merged in time order and the
-        beliefs recomputed, so the evidence count is unchanged (nothing lost, nothing doubled).
-        """
-        if absorb == keep:
-            return
-        for key in [k for k in self._pairs if k[0] == absorb]:
-            src = self._pairs.pop(key)
-            dst_key = (keep, key[1])
-            dst = self._pairs.get(dst_key)
-            if dst is None:
-                dst = self._pairs[dst_key] = PairLog(self.prior_alpha, self.prior_beta)
-            for entry in src.entries:
-                entry.node = keep
-            pend = self._pending_by_pair.pop(key, None)
-            if pend:
-                self._pending_by_pair.setdefault(dst_key, []).extend(pend)
-            merged = sorted(dst.entries + src.entries, key=lambda e: e.t)
-            # at most one compacted bucket per pair: fold a second one into the first
-            buckets = [e for e in merged if e.status is _COMPACTED]
-            if len(buckets) > 1:
-                head = buckets[0]
-                for extra in buckets[1:]:
-                    merge_into_bucket(head, keep, key[1], extra.t, extra.d_alpha, extra.d_beta, extra.n_folded,
-                                      extra.summary)
-                    extra.alive = False
-                merged = [e for e in merged if e.alive]
-                merged.remove(head)
-                merged.insert(0, head)
-            dst.entries = merged
-            self._refresh(dst)
-
-    # ---------------------------------------------------------- serialisation
-    def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready dict (node ids must be str or int)."""
-        pairs = []
-        for (node, predicate), log in self.logs().items():
-            pair: dict[str, Any] = {
-                "node": node,
-                "predicate": predicate,
-                "alpha": log.alpha,
-                "beta": log.beta,
-                "entries": list(map(entry_row, log.entries)),
-            }
-            summary = bucket_summary(log.entries)
-            if summary is not None:
-                # optional: older readers ignore it, and files without it load with unknown counts
-                pair["fold_summary"] = summary.to_dict()
-            pairs.append(pair)
-        return {
-            "prior": [self.prior_alpha, self.prior_beta],
-            "pairs": pairs,
-            "compacted_ids": self.compacted_ids(),
-            "n_compacted": self.n_compacted,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any], *, where: str = "provenance") -> ProvenanceStore:
-        """Rebuild a store; checks that every stored belief equals its log's reconstruction (Eq. 4)."""
-        try:
-            prior = (float(data["prior"][0]), float(data["prior"][1]))
-            logs: dict[PairKey, PairLog] = {}
-            for i, pair in enumerate(data["pairs"]):
-                node, predicate = pair["node"], pair["predicate"]
-                if not isinstance(predicate, str) or not predicate:
-                    raise FormatError(f"{where}.pairs[{i}].predicate must be a non-empty string")
-                log = logs.setdefault((node, predicate), PairLog(*prior))
-                for j, raw in enumerate(pair["entries"]):
-                    eid, t, da, db, status, stance, corr, n_folded = raw[:8]
-                    st = _STATUS_BY_VALUE.get(status)
-                    if st is None:
-                        raise FormatError(f"{where}.pairs[{i}].entries[{j}]: unknown status {status!r}")
-                    if not (math.isfinite(da) and math.isfinite(db)):
-                        raise FormatError(f"{where}.pairs[{i}].entries[{j}]: increments must be finite")
-                    verdict, confidence = entry_extras(raw, f"{where}.pairs[{i}].entries[{j}]")
-                    e = ProvenanceEntry(eid, int(t), float(da), float(db), st, node, predicate, int(stance),
-                                        verdict, confidence)
-                    e.corroborated_by = list(corr) if corr else None
-                    e.n_folded = int(n_folded)
-                    log.entries.append(e)
-                if pair.get("fold_summary") is not None:
-                    attach_summary(log.entries, FoldSummary.from_dict(pair["fold_summary"]), f"{where}.pairs[{i}]")
-                rebuilt = belief_from_entries(prior, log.entries)
-                for name, stored, value in zip(("alpha", "beta"), (pair["alpha"], pair["beta"]), rebuilt):
-                    if not math.isclose(float(stored), value, rel_tol=1e-9, abs_tol=1e-9):
-                        raise FormatError(
-                            f"{where}.pairs[{i}] ({node!r}, {predicate!r}): stored {name}={stored!r} does not "
-                            f"equal prior + sum of logged increments ({value!r}); the file was edited or corrupted"
-                        )
-                if rebuilt[0] <= 0 or rebuilt[1] <= 0:
-                    raise FormatError(f"{where}.pairs[{i}]: belief parameters must stay > 0")
-                # keep the stored running values bit-for-bit (they agree with the log to 1e-9)
-                log.alpha, log.beta = float(pair["alpha"]), float(pair["beta"])
-            return cls.from_logs(
-                logs,
-                prior=prior,
-                compacted_ids=data.get("compacted_ids", []),
-                n_compacted=int(data.get("n_compacted", 0)),
-            )
-        except FormatError:
-            raise
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            raise FormatError(f"{where}: malformed provenance data ({type(exc).__name__}: {exc})") from exc
-
-    @classmethod
-    def from_logs(
-        cls,
-        logs: dict[PairKey, PairLog],
-        *,
-        prior: tuple[float, float],
-        remember_compacted: int = 100_000,
-        timeline: Iterable[ProvenanceEntry] | None = None,
-        quarantine: Iterable[ProvenanceEntry] | None = None,
-        disagreement: Iterable[ProvenanceEntry] | None = None,
-        compacted_ids: Iterable[str] = (),
-        n_compacted: int = 0,
-    ) -> ProvenanceStore:
-        """A store holding these (loaded, already checked) logs, for loaders.
-
-        The event index and each pair's pending list are rebuilt from the logs: the index in
-        log order, the pending lists in time order. The timeline and the queues default to the
-        non-compacted entries and the pending entries in time order (what a JSON file implies);
-        a loader that saved their exact order passes it. Entries must be distinct objects."""
-        store = cls(prior, remember_compacted=remember_compacted)
-        store._pairs = logs
-        by_event = store._by_event
-        for log in logs.values():
-            for e in log.entries:
-                if e.event_id is not None:
-                    index_event(by_event, e.event_id, e)
-        by_time = attrgetter("t")
-        pending = sorted((e for log in logs.values() for e in log.entries if e.status in PENDING), key=by_time)
-        for e in pending:
-            store._pending_by_pair.setdefault((e.node, e.predicate), []).append(e)
-        if timeline is None:
-            timeline = sorted((e for log in logs.values() for e in log.entries if e.status is not _COMPACTED),
-                              key=by_time)
-        store._timeline.extend(timeline)
-        if quarantine is None:
-            quarantine = (e for e in pending if e.status is _QUARANTINED)
-        if disagreement is None:
-            disagreement = (e for e in pending if e.status is _REFUSED)
-        store.quarantine.extend(quarantine)
-        store.disagreement.extend(disagreement)
-        store._compacted_order.extend(compacted_ids)  # bounded by remember_compacted: keeps the newest
-        store.n_compacted = n_compacted
-        return store
+    def index_pending(self, entries: Iterable[ProvenanceEntry]) -> None:
+        """Append pending entries (already in their logs and queues) to their pairs' pending lists, in order."""
+        by_pair = self._pending_by_pair
+        for e in entries:
+            by_pair.setdefault((e.node, e.predicate), []).append(e)

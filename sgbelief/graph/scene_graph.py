@@ -15,6 +15,8 @@ import networkx as nx
 
 from sgbelief.errors import UnknownNodeError, UnknownPredicateError
 from sgbelief.graph.belief import PRIOR_ALPHA, PRIOR_BETA, BetaBelief
+from sgbelief.graph.entry_log import EntryLog
+from sgbelief.graph.migration import move_node, remove_node
 from sgbelief.graph.provenance import ProvenanceStore
 
 NodeId = str | int
@@ -53,13 +55,13 @@ class SceneGraph:
         *,
         prior: tuple[float, float] = (PRIOR_ALPHA, PRIOR_BETA),
         name: str | None = None,
-        provenance: ProvenanceStore | None = None,
+        provenance: EntryLog | None = None,
         create_nodes: bool = False,
     ) -> None:
         self.nx: nx.MultiDiGraph = nx.MultiDiGraph(name=name or "sgbelief")
         #: the beliefs and their logs; ``provenance``: an empty store to use instead of a
         #: new reference store with ``prior`` (then ``prior`` is ignored)
-        self.provenance = ProvenanceStore(prior) if provenance is None else provenance
+        self.provenance: EntryLog = ProvenanceStore(prior) if provenance is None else provenance
         self.vocabulary: frozenset[str] | None = None
         if vocabulary is not None:
             preds = getattr(vocabulary, "predicates", vocabulary)
@@ -109,7 +111,7 @@ class SceneGraph:
     def remove_node(self, node: NodeId) -> None:
         """Remove a node, its edges and its beliefs/provenance."""
         self._require(node)
-        self.provenance.remove_node(node)
+        remove_node(self.provenance, node)
         self.nx.remove_node(node)
 
     def has_node(self, node: object) -> bool:
@@ -252,7 +254,7 @@ class SceneGraph:
         self._require(absorb)
         if keep == absorb:
             return
-        self.provenance.move_node(absorb, keep)
+        move_node(self.provenance, absorb, keep)
         g = self.nx
         for _, v, k, d in list(g.out_edges(absorb, keys=True, data=True)):
             if v != keep and v != absorb and not g.has_edge(keep, v, key=k):

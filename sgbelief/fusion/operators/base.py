@@ -28,6 +28,8 @@ from sgbelief.fusion.protocol import (
     new_stats,
 )
 from sgbelief.fusion.rules import claim_asserts, verdict
+from sgbelief.graph.compaction import compact
+from sgbelief.graph.retraction import retract
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
@@ -160,7 +162,7 @@ class BaseOperator:
         out = self._timeouts(graph, t)
         schedule = self.schedule
         if schedule.advance(graph.meta, t):
-            self.stats["compacted"] += graph.provenance.compact(schedule.horizon(t))
+            self.stats["compacted"] += compact(graph.provenance, schedule.horizon(t))
         return out
 
     def _timeouts(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
@@ -285,7 +287,7 @@ class BaseOperator:
     # ------------------------------------------------------- user actions
     def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
         """Retract an event exactly (cascading to corroborating events within T_cor)."""
-        return graph.provenance.retract(event_id, cascade_window=self.config.t_cor)
+        return retract(graph.provenance, event_id, cascade_window=self.config.t_cor)
 
     def merge_nodes(self, graph: SceneGraph, keep: Any, absorb: Any) -> None:
         """Merge element ``absorb`` into ``keep`` (``graph.merge_nodes``: provenance and beliefs

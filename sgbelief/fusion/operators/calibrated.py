@@ -46,7 +46,7 @@ from sgbelief.graph.provenance import EntryRecord, EntryStatus, EntryVerdict
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
     from sgbelief.fusion.events import EvidenceEvent
-    from sgbelief.graph.provenance import ProvenanceStore
+    from sgbelief.graph.entry_log import EntryLog
     from sgbelief.graph.scene_graph import SceneGraph
 
 _CONTRA = Verdict.CONTRADICTS
@@ -97,11 +97,11 @@ class CalibratedOperator(BaseOperator):
         #: pair-level conformal scores s(p_v, y) per predicate (Property 1 on beliefs)
         self.pair_conformal_: dict[str, ConformalSlice] = {}
         #: claims applied so far per (v, phi), per provenance store (the support of the next claim)
-        self._claims: dict[int, tuple[ProvenanceStore, dict[tuple[Any, str], int]]] = {}
+        self._claims: dict[int, tuple[EntryLog, dict[tuple[Any, str], int]]] = {}
         #: the time of the last label observation per (v, psi), per provenance store (once per frame)
-        self._label_seen: dict[int, tuple[ProvenanceStore, dict[tuple[Any, str], int]]] = {}
+        self._label_seen: dict[int, tuple[EntryLog, dict[tuple[Any, str], int]]] = {}
         #: the map-wide consensus (claim table, labels, its calibration) per provenance store
-        self._consensus: dict[int, tuple[ProvenanceStore, MapConsensus]] = {}
+        self._consensus: dict[int, tuple[EntryLog, MapConsensus]] = {}
         #: freeze_calibration() also stops the consensus' refits
         self._consensus_frozen = False
         # the vocabulary whose exclusive classes ``consensus_classes`` holds (see there)
@@ -269,7 +269,7 @@ class CalibratedOperator(BaseOperator):
         consensus.add_claim(node, pred, event.context, c, cell, y is not None, event.id, mass)
         return found if found is not None else self.calibrator_.likelihood_ratio(c, context, pred)
 
-    def _consensus_of(self, prov: ProvenanceStore) -> MapConsensus:
+    def _consensus_of(self, prov: EntryLog) -> MapConsensus:
         """The consensus of one provenance store (created on first use)."""
         held = self._consensus.get(id(prov))
         if held is None or held[0] is not prov or held[1].exclusive is not self.consensus_classes:
@@ -315,7 +315,7 @@ class CalibratedOperator(BaseOperator):
                                     status=EntryStatus.COMMITTED, stance=1, verdict=EntryVerdict.GEOMETRIC,
                                     confidence=event.confidence))
 
-    def _exclude_rivals(self, prov: ProvenanceStore, node: Any, pred: str, event: EvidenceEvent, d_alpha: float) -> None:
+    def _exclude_rivals(self, prov: EntryLog, node: Any, pred: str, event: EvidenceEvent, d_alpha: float) -> None:
         """``exclusive_evidence: rivals``: the committed claim's d_alpha is evidence against each class
         that excludes ``pred`` and already has a belief at v (:func:`~sgbelief.fusion.rules.exclusion_increments`)."""
         ea, eb = exclusion_increments(d_alpha)
@@ -331,14 +331,14 @@ class CalibratedOperator(BaseOperator):
             self.calibrator_.add(context, event.predicate, event.confidence, y)
 
     # ---------------------------------------------------------- support
-    def _claims_of(self, prov: ProvenanceStore) -> dict[tuple[Any, str], int]:
+    def _claims_of(self, prov: EntryLog) -> dict[tuple[Any, str], int]:
         """The claim counts of one provenance store (created on first use)."""
         held = self._claims.get(id(prov))
         if held is None or held[0] is not prov:
             held = self._claims[id(prov)] = (prov, {})
         return held[1]
 
-    def _claims_in_log(self, prov: ProvenanceStore, node: Any, predicate: str) -> int:
+    def _claims_in_log(self, prov: EntryLog, node: Any, predicate: str) -> int:
         """Claims a pair's log already holds (a graph loaded from disk): its distinct event ids,
         a compacted entry counting the entries it folded."""
         n = 0
@@ -353,21 +353,21 @@ class CalibratedOperator(BaseOperator):
                 n += 1
         return n
 
-    def _label_seen_of(self, prov: ProvenanceStore) -> dict[tuple[Any, str], int]:
+    def _label_seen_of(self, prov: EntryLog) -> dict[tuple[Any, str], int]:
         """(v, psi) -> the last time a label observation was recorded there, per provenance store."""
         held = self._label_seen.get(id(prov))
         if held is None or held[0] is not prov:
             held = self._label_seen[id(prov)] = (prov, {})
         return held[1]
 
-    def _claims_so_far(self, prov: ProvenanceStore, node: Any, predicate: str) -> int:
+    def _claims_so_far(self, prov: EntryLog, node: Any, predicate: str) -> int:
         """Claims applied at (v, phi) so far (counted from the log the first time a pair is seen)."""
         n = self._claims_of(prov).get((node, predicate))
         if n is None:
             n = self._claims_in_log(prov, node, predicate) if (node, predicate) in prov else 0
         return n
 
-    def _next_claim(self, prov: ProvenanceStore, node: Any, predicate: str) -> int:
+    def _next_claim(self, prov: EntryLog, node: Any, predicate: str) -> int:
         """Earlier claims at (v, phi), counting this one for the next."""
         n = self._claims_so_far(prov, node, predicate)
         self._claims_of(prov)[(node, predicate)] = n + 1
