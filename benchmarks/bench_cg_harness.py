@@ -46,12 +46,17 @@ def main(argv: list[str] | None = None) -> int:
                          "10 with 25 at 128x96 or 192x144, 19 with 150 at 128x96, 29 with 200 at 192x144); label "
                          "accuracy is only comparable at 0")
     ap.add_argument("--size", default="128x96", help="rendered image size WxH (default %(default)s)")
+    ap.add_argument("--confidences", default="uniform", choices=["uniform", "rfcn", "ssd"],
+                    help="the detector's confidences: uniform whether its class is right or not (default), or "
+                         "drawn from a shipped detector's matched / unmatched records (confidences that carry "
+                         "information)")
     ap.add_argument("--json", default=None, help="write the results here")
     args = ap.parse_args(argv)
     if not args.cg:
         ap.error(f"pass --cg or set {H.ENV}")
     if args.cpu_time:
         H.CLOCK[0] = time.process_time
+    H.CONFIDENCES[0] = args.confidences
     width, height = (int(x) for x in args.size.lower().split("x"))
     world = H.render_world(n_frames=args.frames, clutter=args.clutter, width=width, height=height)
     cg = H.import_conceptgraph(args.cg)

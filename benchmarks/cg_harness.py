@@ -157,9 +157,34 @@ class Detections:
     truth: list[int]  # ground-truth object index per mask
 
 
+#: where the detector's confidences come from: "uniform" (U(0.55, 0.97) whether the class is right or
+#: not: confidences that carry no information), or a shipped detector's records ("rfcn", "ssd"): a
+#: right class draws a score of that detector's matched records, a wrong one of its unmatched ones
+CONFIDENCES = ["uniform"]
+_SCORE_POOLS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _score_pools(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(scores of matched records, scores of unmatched records) of a shipped detector."""
+    if name not in _SCORE_POOLS:
+        from sgbelief.eval.detector_records import available_records, load_detector_records
+
+        rec = load_detector_records(next(r for r in available_records() if r.startswith(name)))
+        _SCORE_POOLS[name] = (rec.score[rec.matched == 1].astype(float), rec.score[rec.matched == 0].astype(float))
+    return _SCORE_POOLS[name]
+
+
+def _confidence(rng: np.random.Generator, right: bool) -> float:
+    if CONFIDENCES[0] == "uniform":
+        return float(rng.uniform(0.55, 0.97))
+    matched, unmatched = _score_pools(CONFIDENCES[0])
+    pool = matched if right else unmatched
+    return float(pool[rng.integers(len(pool))])
+
+
 def detect(world: World, k: int, rng: np.random.Generator, *, min_pixels: int = 60, feat_dim: int = 64,
            feats: dict | None = None) -> Detections:
-    """The noisy, overconfident detector on frame ``k``."""
+    """The noisy, overconfident detector on frame ``k`` (its confidences: :data:`CONFIDENCES`)."""
     fr = world.frames[k]
     classes = world.classes
     masks, xyxy, conf, cls, img_f, txt_f, truth = [], [], [], [], [], [], []
@@ -175,7 +200,7 @@ def detect(world: World, k: int, rng: np.random.Generator, *, min_pixels: int = 
             name = c
         masks.append(m)
         xyxy.append([xs.min(), ys.min(), xs.max(), ys.max()])
-        conf.append(rng.uniform(0.55, 0.97))
+        conf.append(_confidence(rng, name == c))
         cls.append(classes.index(name))
         v = feats["obj"][i] + 0.25 * rng.normal(size=feat_dim)
         img_f.append(v / np.linalg.norm(v))
