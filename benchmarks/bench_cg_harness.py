@@ -122,7 +122,7 @@ def _cost_per_detection(backend: object, vote: H.RunResult, r: H.RunResult) -> d
     fresh graph (after one warm-up replay)."""
     from sgbelief.api.operators import make_operator
     from sgbelief.fusion.channel import FrameLabels
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.api.scene_graph import SceneGraph  # the backend's graph type: the fast store
 
     paired = len(r.merge_ms) == len(vote.merge_ms) and r.n_dets == vote.n_dets
     if paired:  # per frame: (merge with the backend - without) / detections; the median over frames

@@ -24,10 +24,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def build_map(n_nodes: int, seed: int = 0):
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.graph.scene_graph import SceneGraphModel
 
     rng = random.Random(seed)
-    g = SceneGraph()
+    g = SceneGraphModel()
     indoor = ["chair", "chair", "chair", "table", "desk", "bookshelf", "sofa", "window", "cabinet", "lamp"]
     outdoor = ["car", "car", "car", "person", "traffic sign", "building", "vegetation"]
     pred_of = {"chair": "is_chair", "table": "is_table_or_desk", "desk": "is_table_or_desk",

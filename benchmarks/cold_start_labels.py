@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sgbelief.api.operators import make_operator  # noqa: E402
 from sgbelief.fusion.events import EvidenceEvent  # noqa: E402
-from sgbelief.graph.scene_graph import SceneGraph  # noqa: E402
+from sgbelief.graph.scene_graph import SceneGraphModel  # noqa: E402
 from sgbelief.resources import data_path  # noqa: E402
 
 
@@ -54,7 +54,7 @@ def uninformative_claims(rng: np.random.Generator, n: int, wrong: int) -> list:
 def accuracies(streams: list[list[tuple[int, float]]]) -> tuple[float, float]:
     """(vote accuracy, comod accuracy) over objects whose truth is class 0."""
     op = make_operator("comod")
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     t = 0
     for j, claims in enumerate(streams):
         for k, c in claims:

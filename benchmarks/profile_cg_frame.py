@@ -212,7 +212,7 @@ def run(n_obj: int, n_dets: int, frames: int, channel: str, profiler: Any = None
     # the operator alone: the same events, replayed in one update_many call into a fresh graph
     from sgbelief.api.operators import make_operator
     from sgbelief.fusion.channel import FrameLabels
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.api.scene_graph import SceneGraph  # the backend's graph type: the fast store
 
     items = [(ev, FrameLabels(labels)) for ev, labels in backend.event_log]
     make_operator("comod", backend.operator.config, backend.table).update_many(

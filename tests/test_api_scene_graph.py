@@ -20,7 +20,7 @@ from sgbelief.query import run_query
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _fill(g: model.SceneGraph) -> model.SceneGraph:
+def _fill(g: model.SceneGraphModel) -> model.SceneGraphModel:
     g.add_node("c", bbox=((0.3, 0.8, 0.0), (0.8, 1.3, 0.95)), label="chair")
     g.add_node("w", bbox=((1.6, -0.5, 0.9), (1.7, 1.0, 2.0)), label="window")
     g.provenance.record("c", "is_chair", "e1", 0, 3.0, 0.0)
@@ -29,10 +29,24 @@ def _fill(g: model.SceneGraph) -> model.SceneGraph:
 
 def test_public_name_is_the_api_subclass_of_the_model() -> None:
     assert sgbelief.SceneGraph is SceneGraph
-    assert issubclass(SceneGraph, model.SceneGraph)
+    assert issubclass(SceneGraph, model.SceneGraphModel)
     for name in ("save", "load", "query"):
         assert hasattr(SceneGraph, name)
-        assert not hasattr(model.SceneGraph, name), f"the model class grew {name!r}"
+        assert not hasattr(model.SceneGraphModel, name), f"the model class grew {name!r}"
+
+
+def test_the_models_old_name_warns_and_is_the_model() -> None:
+    """One name, one class: the model was also called SceneGraph (with the reference store as its
+    default, unlike sgbelief.SceneGraph); the old name warns until 0.2.0."""
+    import pytest
+
+    import sgbelief.graph as graph_pkg
+    from sgbelief.errors import SgbeliefDeprecationWarning
+
+    with pytest.warns(SgbeliefDeprecationWarning, match="SceneGraphModel"):
+        assert model.SceneGraph is model.SceneGraphModel
+    with pytest.warns(SgbeliefDeprecationWarning):
+        assert graph_pkg.SceneGraph is model.SceneGraphModel
 
 
 def test_model_module_imports_neither_io_nor_query() -> None:
@@ -47,10 +61,10 @@ def test_model_module_imports_neither_io_nor_query() -> None:
 
 @pytest.mark.parametrize("suffix", ["json", "npz"])
 def test_loaders_build_the_class_they_are_given(tmp_path: Path, suffix: str) -> None:
-    g = _fill(model.SceneGraph())
+    g = _fill(model.SceneGraphModel())
     path = save_graph(g, tmp_path / f"g.{suffix}")
     plain = load_graph(path)
-    assert type(plain) is model.SceneGraph  # the model class by default
+    assert type(plain) is model.SceneGraphModel  # the model class by default
     public = load_graph(path, graph_type=SceneGraph)
     assert type(public) is SceneGraph
     assert type(SceneGraph.load(path)) is SceneGraph

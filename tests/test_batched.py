@@ -16,7 +16,7 @@ from sgbelief.eval.formats import EventRecord
 from sgbelief.eval.random_stream import random_records
 from sgbelief.eval.replay import OperatorRun, make_runs, replay
 from sgbelief.fusion.registry import OPERATOR_NAMES
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.testing import provenance_signature
 
 #: the shipped operators that declare a pair rule (the batched engine asks the operator)
@@ -30,21 +30,21 @@ def test_the_pair_local_baselines_declare_their_rule() -> None:
 def _streaming(records: list[EventRecord], name: str, config: dict[str, Any] | None = None, *,
                prior: tuple[float, float] = (1.0, 1.0), remember: int = 100_000) -> OperatorRun:
     run = make_runs([name], None, config)[0]
-    run.graph = SceneGraph(prior=prior, create_nodes=True)
+    run.graph = SceneGraphModel(prior=prior, create_nodes=True)
     run.graph.provenance.remember_compacted = remember
     replay(records, [run])
     return run
 
 
 def _batched(records: list[EventRecord], name: str, config: dict[str, Any] | None = None, *,
-             prior: tuple[float, float] = (1.0, 1.0), remember: int = 100_000) -> tuple[SceneGraph, dict[str, int]]:
-    graph = SceneGraph(prior=prior, create_nodes=True)
+             prior: tuple[float, float] = (1.0, 1.0), remember: int = 100_000) -> tuple[SceneGraphModel, dict[str, int]]:
+    graph = SceneGraphModel(prior=prior, create_nodes=True)
     graph.provenance.remember_compacted = remember
     return batched_replay(EventColumns.from_records(records), name, None, config, graph=graph)
 
 
 def _assert_same(records: list[EventRecord], name: str, config: dict[str, Any] | None = None,
-                 **store: Any) -> SceneGraph | None:
+                 **store: Any) -> SceneGraphModel | None:
     """Streaming and batched replay agree on everything observable; returns the batched graph.
     When the streaming engine rejects an event whose id still has live entries, the batched
     engine rejects the same event (and None is returned)."""
@@ -170,7 +170,7 @@ def test_batched_rejects_calibrated_operators_and_decreasing_time() -> None:
     cols.event = cols.event[::-1].copy()
     with pytest.raises(ValueError, match="stream order"):
         batched_replay(cols, "majority")
-    graph = SceneGraph(create_nodes=True)
+    graph = SceneGraphModel(create_nodes=True)
     graph.add_node("x")
     with pytest.raises(ValueError, match="empty graph"):
         batched_replay(EventColumns.from_records(random_records(0, 5)), "majority", graph=graph)

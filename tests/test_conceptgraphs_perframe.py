@@ -126,9 +126,9 @@ def test_labels_follow_the_beliefs_and_merges() -> None:
 def test_external_graph_evidence_is_still_read() -> None:
     from sgbelief.fusion.events import EvidenceEvent
     from sgbelief.api.operators import make_operator
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.graph.scene_graph import SceneGraphModel
 
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     op = make_operator("majority")
     for t in range(5):  # evidence the backend never routed
         op.update(g, EvidenceEvent({"cg-0": 1.0}, "is_sofa", 0.99, "other", t))

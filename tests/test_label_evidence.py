@@ -17,7 +17,7 @@ from sgbelief.fusion.events import EvidenceEvent
 from sgbelief.fusion.open_vocab import derive_table
 from sgbelief.fusion.rules import label_observations
 from sgbelief.graph.provenance import EntryStatus, EntryVerdict
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.testing import check_fast_matches_reference
 
 CLASSES = ["sofa", "tv", "chair", "table", "desk", "otherprop"]
@@ -53,7 +53,7 @@ def test_label_observations_skip_the_claim_and_repeat_once_per_frame() -> None:
 def test_a_sofa_called_tv_is_committed_as_a_sofa(table: SubsumptionTable, engine: str) -> None:
     op = make_operator("comod", LABEL, table, engine=engine)
     assert op.observes_label
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     for event, labels in _tv_claims(6):
         op.update(g, event, labels)
     assert g.probability("v", "is_tv") < 0.5  # every claim refused, every label against it
@@ -74,7 +74,7 @@ def test_other_settings_leave_the_label_s_own_predicate_alone(table: Subsumption
     op = make_operator(name, config, table)
     assert not op.observes_label
     assert op.observes_geometry == (name == "comod" and config != {"geometric_evidence": "none"})
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     for event, labels in _tv_claims(4):
         op.update(g, event, labels)
     assert ("v", "is_sofa") not in g.provenance
@@ -82,7 +82,7 @@ def test_other_settings_leave_the_label_s_own_predicate_alone(table: Subsumption
 
 def test_several_claims_in_one_frame_see_one_label(table: SubsumptionTable) -> None:
     op = make_operator("comod", LABEL, table)
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     for k, pred in enumerate(["is_tv", "is_chair", "is_tv"]):
         op.update(g, EvidenceEvent({"v": 1.0}, pred, 0.8, "det", 5, f"f{k}"), FrameLabels({"v": "sofa"}))
     assert len(g.provenance.entries("v", "is_sofa")) == 1
@@ -90,7 +90,7 @@ def test_several_claims_in_one_frame_see_one_label(table: SubsumptionTable) -> N
 
 def test_retracting_the_claim_retracts_its_label_observation(table: SubsumptionTable) -> None:
     op = make_operator("comod", LABEL, table)
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     for event, labels in _tv_claims(2):
         op.update(g, event, labels)
     op.retract(g, "e1")
@@ -103,7 +103,7 @@ def test_label_observations_are_not_counted_as_claims(table: SubsumptionTable) -
     """The support stratum counts claims: a graph reloaded with label observations at (v, psi)
     recounts the claims there as zero, as the live counter has it."""
     op = make_operator("comod", LABEL, table)
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     for event, labels in _tv_claims(3):
         op.update(g, event, labels)
     assert op._claims_in_log(g.provenance, "v", "is_sofa") == 0

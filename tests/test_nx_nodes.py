@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sgbelief._fast.nx_nodes import node_table
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 
 _ops = st.lists(st.tuples(st.sampled_from(["add", "remove", "edge"]), st.integers(0, 6), st.integers(0, 6)),
                 max_size=30)
@@ -34,7 +34,7 @@ def test_node_table_is_the_public_node_view(ops: list[tuple[str, int, int]], cls
 
 
 def test_node_table_of_a_scene_graph() -> None:
-    g = SceneGraph()
+    g = SceneGraphModel()
     g.add_node("a", label="chair")
     assert "a" in node_table(g.nx) and "b" not in node_table(g.nx)
     assert node_table(g.nx)["a"] == g.node_attrs("a")

@@ -18,7 +18,7 @@ from sgbelief.fusion.protocol import Action, FusionOperator, UpdateReport
 from sgbelief.api.operators import make_operator
 from sgbelief.fusion.registry import OPERATOR_NAMES
 from sgbelief.graph.provenance import EntryStatus
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.testing import check_fusion_operator, conformance_table
 
 TABLE = conformance_table()
@@ -69,7 +69,7 @@ def test_make_operator_resolves_names_and_instances() -> None:
 def test_one_event_with_lr_5_moves_the_mean_by_one_ninth() -> None:
     op = make_operator("cal", None, TABLE)
     op.calibrator_.likelihood_ratio = lambda c, k, p: (5.0, 1.0)  # Lambda_hat = 5, kappa_hat = 1
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     rep = op.update(g, EvidenceEvent({"v": 1.0}, "is_car", 0.9, "k", 0), NullChannel())
     assert rep.targets[0].action is Action.COMMITTED
     assert g.probability("v", "is_car") - 0.5 == pytest.approx(1 / 9)
@@ -80,7 +80,7 @@ def test_one_event_with_lr_5_moves_the_mean_by_one_ninth() -> None:
 def test_targeting_mass_weights_and_threshold() -> None:
     op = make_operator("cal", None, TABLE)
     op.calibrator_.likelihood_ratio = lambda c, k, p: (3.0, 1.0)
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     rep = op.update(g, EvidenceEvent({"a": 0.6, "b": 0.3, "c": 0.05}, "is_car", 0.9, "k", 0))
     acts = rep.actions()
     assert acts["c"] is Action.BELOW_THRESHOLD and "c" not in g
@@ -112,7 +112,7 @@ def test_property2_comod_never_commits_a_contradicted_claim(stream, variant) -> 
     else:
         op = make_operator(variant, {"tau_rev": 0.2}, TABLE)
     assert op.claims_property2 == (variant != "comod")
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     t = 0
     for node, pred, c, label, ctx, dt in stream:
         t += dt
@@ -140,7 +140,7 @@ def test_property2_comod_never_commits_a_contradicted_claim(stream, variant) -> 
 @given(events, st.sampled_from(OPERATOR_NAMES))
 def test_beliefs_stay_finite_and_positive(stream, name) -> None:
     op = make_operator(name, None, TABLE)
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     for i, (node, pred, c, label, ctx, _dt) in enumerate(stream):
         op.update(g, EvidenceEvent({node: 1.0}, pred, c, ctx, i), FrameLabels({node: label}))
     for key in g.provenance.pairs():
@@ -172,7 +172,7 @@ def test_retraction_is_exact_for_non_revision_events(stream, data, name) -> None
 
     def run(skip: int | None):
         op = _frozen_cal() if name == "cal" else make_operator(name, None, TABLE)
-        g = SceneGraph(create_nodes=True)
+        g = SceneGraphModel(create_nodes=True)
         for j, (node, pred, c, label, ctx, _dt) in enumerate(stream):
             if j != skip:
                 op.update(g, EvidenceEvent({node: 1.0}, pred, c, ctx, j, f"e{j}"), FrameLabels({node: label}))
@@ -187,8 +187,8 @@ def test_retraction_is_exact_for_non_revision_events(stream, data, name) -> None
             assert x == pytest.approx(y, rel=1e-12, abs=1e-12)
 
 
-def _confident_graph() -> SceneGraph:
-    g = SceneGraph(create_nodes=True)
+def _confident_graph() -> SceneGraphModel:
+    g = SceneGraphModel(create_nodes=True)
     g.add_node("v")
     g.provenance.record("v", "is_car", "seed", 0, 0.0, 40.0)  # confidently "not a car"
     return g
@@ -241,7 +241,7 @@ def test_disconfirming_evidence_discards_and_confirm_commits() -> None:
 
 def test_disagreement_queue_resolution_expiry_and_override() -> None:
     op = make_operator("comod", {"geometric_evidence": "none"}, TABLE)  # the queue alone
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     ped_on_car = EvidenceEvent({"v": 1.0}, "is_pedestrian", 0.9, "k", 0, "bad")
     rep = op.update(g, ped_on_car, FrameLabels({"v": "car"}))
     assert rep.targets[0].verdict is Verdict.CONTRADICTS and rep.targets[0].action is Action.REFUSED
@@ -268,12 +268,12 @@ def test_cal_does_not_refuse_what_comod_refuses() -> None:
     ev = EvidenceEvent({"v": 1.0}, "is_pedestrian", 0.9, "k", 0)
     labels = FrameLabels({"v": "car"})
     for name, action in (("cal", Action.COMMITTED), ("comod", Action.REFUSED), ("majority", Action.COMMITTED)):
-        rep = make_operator(name, None, TABLE).update(SceneGraph(create_nodes=True), ev, labels)
+        rep = make_operator(name, None, TABLE).update(SceneGraphModel(create_nodes=True), ev, labels)
         assert rep.targets[0].action is action, name
 
 
 def test_unknown_predicate_is_rejected_before_any_change() -> None:
-    g = SceneGraph(vocabulary=TABLE, create_nodes=True)
+    g = SceneGraphModel(vocabulary=TABLE, create_nodes=True)
     op = make_operator("comod", None, TABLE)
     op.update(g, EvidenceEvent({"v": 1.0}, "is_car", 0.9, "k", 0), FrameLabels({"v": "car"}))
     snapshot = (g.clock, g.evidence_count(), g.provenance.alpha_beta("v", "is_car"))
@@ -284,7 +284,7 @@ def test_unknown_predicate_is_rejected_before_any_change() -> None:
 
 def test_compaction_runs_every_t_prov_and_keeps_beliefs() -> None:
     op = make_operator("majority", {"t_prov": 50}, TABLE)
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     for t in range(400):
         op.update(g, EvidenceEvent({f"n{t % 3}": 1.0}, "is_car", 0.7, "k", t))
     assert op.stats["compacted"] > 0
@@ -298,9 +298,9 @@ def test_compaction_interval_spreads_the_folding_over_smaller_passes() -> None:
     # same horizon T_prov, passes every 5 steps instead of every 50: the same entries end up
     # folded (beliefs and evidence count unchanged), but no single pass folds more than ~5 steps'
     # worth of entries
-    def run(t_compact: int | None) -> tuple[SceneGraph, list[int]]:
+    def run(t_compact: int | None) -> tuple[SceneGraphModel, list[int]]:
         op = make_operator("comod", {"t_prov": 50, "t_compact": t_compact}, TABLE)
-        g = SceneGraph(create_nodes=True)
+        g = SceneGraphModel(create_nodes=True)
         passes = []
         for t in range(400):
             before = op.stats["compacted"]
@@ -321,7 +321,7 @@ def test_compaction_interval_spreads_the_folding_over_smaller_passes() -> None:
 
 
 def test_changing_the_compaction_interval_of_a_saved_graph_keeps_compacting() -> None:
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     short = make_operator("majority", {"t_prov": 20, "t_compact": 2}, TABLE)
     for t in range(100):
         short.update(g, EvidenceEvent({"v": 1.0}, "is_car", 0.7, "k", t))
@@ -349,7 +349,7 @@ def _invariance_stream(seed: int = 5):
 
 def _committed(name: str, transform) -> set:
     op = make_operator(name, None, TABLE)
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     for node, c, label, t in _invariance_stream():
         op.update(g, EvidenceEvent({node: 1.0}, "is_car", transform(c), "vlm", t), FrameLabels({node: label}))
     if hasattr(op, "calibrator_"):
@@ -379,7 +379,7 @@ def test_refined_is_the_vote_of_the_last_window_claims(confs: list[float], windo
     """Refined baseline: Beta(1 + #pos, 1 + #neg) over the last W claims once min_support claims
     arrived, the prior before (the running count of positive votes equals recounting the window)."""
     op = make_operator("refined", {"baselines": {"refined": {"window": window, "min_support": min_support}}}, TABLE)
-    g = SceneGraph(create_nodes=True)
+    g = SceneGraphModel(create_nodes=True)
     for t, c in enumerate(confs):
         op.update(g, EvidenceEvent({"n0": 1.0}, "is_car", c, "ctx", t), report=t % 2 == 0)
         n_seen = t + 1
@@ -401,7 +401,7 @@ def test_a_detector_that_is_always_right_moves_beliefs(name: str) -> None:
     deployment has verified 60 claims, passes 0.6 (cal) / 0.75 (comod) within 3 claims."""
     vocab = SubsumptionTable.shipped("kitti360")
     op = make_operator(name, None, vocab)
-    g = SceneGraph(vocabulary=vocab, create_nodes=True)
+    g = SceneGraphModel(vocabulary=vocab, create_nodes=True)
     for node, c, t in _always_right_stream(20, 3):
         op.update(g, EvidenceEvent({node: 1.0}, "is_car", c, "vlm", t), FrameLabels({node: "car"}))
         if t < 20:  # each element's first claim already commits it
@@ -413,7 +413,7 @@ def test_a_detector_that_is_always_right_moves_beliefs(name: str) -> None:
     assert probs == sorted(probs) and probs[0] > 0.5
     assert probs[-1] > (0.75 if name == "comod" else 0.6), probs
     paper = make_operator(f"{name}_paper", None, vocab)
-    gp = SceneGraph(vocabulary=vocab, create_nodes=True)
+    gp = SceneGraphModel(vocabulary=vocab, create_nodes=True)
     for node, c, t in _always_right_stream(20, 3):
         paper.update(gp, EvidenceEvent({node: 1.0}, "is_car", c, "vlm", t), FrameLabels({node: "car"}))
     assert abs(gp.probability("n19", "is_car") - 0.5) < 0.02  # the paper's reading: (almost) no movement
@@ -429,7 +429,7 @@ def test_comod_is_invariant_to_a_monotone_confidence_transform() -> None:
     assert len(base ^ cubed) <= 6, (len(base), len(cubed), len(base ^ cubed))
     raw_sign = {"verdict_sign": "raw"}
     op1, op2 = make_operator("comod", raw_sign, TABLE), make_operator("comod", raw_sign, TABLE)
-    g1, g2 = SceneGraph(create_nodes=True), SceneGraph(create_nodes=True)
+    g1, g2 = SceneGraphModel(create_nodes=True), SceneGraphModel(create_nodes=True)
     for node, c, label, t in _invariance_stream():
         op1.update(g1, EvidenceEvent({node: 1.0}, "is_car", c, "vlm", t), FrameLabels({node: label}))
         op2.update(g2, EvidenceEvent({node: 1.0}, "is_car", c**3, "vlm", t), FrameLabels({node: label}))
@@ -453,7 +453,7 @@ def test_calibrated_operators_are_invariant_under_monotone_transforms(power: flo
     for name in ("cal", "comod"):
         sets = []
         for f in (lambda c: c, lambda c: c**power):
-            op, g = make_operator(name, None, TABLE), SceneGraph(create_nodes=True)
+            op, g = make_operator(name, None, TABLE), SceneGraphModel(create_nodes=True)
             for node, c, label, t in stream:
                 op.update(g, EvidenceEvent({node: 1.0}, "is_car", f(c), "vlm", t), FrameLabels({node: label}))
             sets.append(g.committed("is_car"))

@@ -14,7 +14,7 @@ from sgbelief.eval.replay import make_runs, replay, score_run
 from sgbelief.fusion import registry
 from sgbelief.fusion.protocol import FusionOperator
 from sgbelief.fusion.registry import OPERATOR_NAMES, PAPER_OPERATOR_NAMES
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.testing import check_fusion_operator, conformance_table, provenance_signature
 
 TABLE = conformance_table()
@@ -40,22 +40,22 @@ class ProtocolOnly:
     def pair_rule(self) -> Any:
         return self.inner.pair_rule
 
-    def update(self, graph: SceneGraph, event: Any, channel: Any = None, *, report: bool = True) -> Any:
+    def update(self, graph: SceneGraphModel, event: Any, channel: Any = None, *, report: bool = True) -> Any:
         return self.inner.update(graph, event, channel, report=report)
 
-    def update_many(self, graph: SceneGraph, items: Any) -> Any:
+    def update_many(self, graph: SceneGraphModel, items: Any) -> Any:
         return self.inner.update_many(graph, items)
 
-    def tick(self, graph: SceneGraph, t: int) -> Any:
+    def tick(self, graph: SceneGraphModel, t: int) -> Any:
         return self.inner.tick(graph, t)
 
-    def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float:
+    def probability(self, graph: SceneGraphModel, node: Any, predicate: str) -> float:
         return self.inner.probability(graph, node, predicate)
 
-    def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
+    def retract(self, graph: SceneGraphModel, event_id: str) -> list[str]:
         return self.inner.retract(graph, event_id)
 
-    def merge_nodes(self, graph: SceneGraph, keep: Any, absorb: Any) -> None:
+    def merge_nodes(self, graph: SceneGraphModel, keep: Any, absorb: Any) -> None:
         self.inner.merge_nodes(graph, keep, absorb)
 
 

@@ -3,7 +3,7 @@
 ``QueryEngine.score_many`` (one literal at a time over the candidates) against ``score`` node by
 node; ``is_near_<class>`` (one ball query per scene) against ``neighbours_of_class``; the
 committed-label class mask read in bulk against ``graph.probability`` node by node; the array
-build against a row-by-row reading of the attributes. A SceneGraph subclass is read as it answers.
+build against a row-by-row reading of the attributes. A SceneGraphModel subclass is read as it answers.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sgbelief.errors import UnknownNodeError, UnknownPredicateError
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.query import DEFAULT_REGISTRY, GeometryContext, QueryEngine, RelationConfig
 from sgbelief.query.language import Compound, Literal
 
@@ -29,8 +29,8 @@ BELIEFS = ["is_car", "is_pedestrian", "is_chair"]
 GEOMETRIC = ["is_near_pedestrian", "is_near_car", "is_stationary", "is_near_road_px", "is_workspace_height"]
 
 
-class Inverted(SceneGraph):
-    """A SceneGraph subclass whose reads answer otherwise (1 - p, and a relabelled chair): the
+class Inverted(SceneGraphModel):
+    """A SceneGraphModel subclass whose reads answer otherwise (1 - p, and a relabelled chair): the
     engine and the context read it as it answers, in bulk and node by node alike."""
 
     def probability(self, node, predicate):  # noqa: ANN001, ANN201
@@ -50,7 +50,7 @@ class Inverted(SceneGraph):
         return {**attrs, "label": "car"} if attrs.get("label") == "chair" else attrs
 
 
-def random_graph(seed: int, n: int, cls: type[SceneGraph] = SceneGraph) -> SceneGraph:
+def random_graph(seed: int, n: int, cls: type[SceneGraphModel] = SceneGraphModel) -> SceneGraphModel:
     rng = np.random.default_rng(seed)
     g = cls()
     for i in range(n):
@@ -161,7 +161,7 @@ def test_is_near_is_any_neighbour(seed: int, distance: float) -> None:
             assert pred(ctx, v) == want
 
 
-def reference_class_mask(g: SceneGraph, cfg: RelationConfig, cls_name: str) -> np.ndarray:
+def reference_class_mask(g: SceneGraphModel, cfg: RelationConfig, cls_name: str) -> np.ndarray:
     """Node by node: the label is one of the class's, or a committed belief on is_<label>."""
     wanted = cfg.labels_of(cls_name)
     preds = [f"is_{c}" for c in sorted(wanted) if f"is_{c}" in set(g.predicates())]
@@ -171,8 +171,8 @@ def reference_class_mask(g: SceneGraph, cfg: RelationConfig, cls_name: str) -> n
 
 
 @pytest.mark.parametrize("commit_tau", [0.3, 0.5, 0.7])
-@pytest.mark.parametrize("cls", [SceneGraph, Inverted])
-def test_committed_class_mask_is_the_per_node_definition(commit_tau: float, cls: type[SceneGraph]) -> None:
+@pytest.mark.parametrize("cls", [SceneGraphModel, Inverted])
+def test_committed_class_mask_is_the_per_node_definition(commit_tau: float, cls: type[SceneGraphModel]) -> None:
     for use_committed in (True, False):
         cfg = RelationConfig(commit_tau=commit_tau, use_committed_labels=use_committed)
         g = random_graph(3, 200, cls)
@@ -184,7 +184,7 @@ def test_committed_class_mask_is_the_per_node_definition(commit_tau: float, cls:
         assert not np.array_equal(GeometryContext(plain).class_mask("car"), GeometryContext(inverted).class_mask("car"))
 
 
-def reference_arrays(g: SceneGraph, cfg: RelationConfig) -> dict[str, object]:
+def reference_arrays(g: SceneGraphModel, cfg: RelationConfig) -> dict[str, object]:
     """The context's arrays read row by row from ``node_attrs``: a bbox, else a centroid as a
     degenerate box; the floor from ``floor_z``, else the median top of the scene's boxed 'floor'
     objects, else its lowest box bottom."""
@@ -215,8 +215,8 @@ def reference_arrays(g: SceneGraph, cfg: RelationConfig) -> dict[str, object]:
             "labels": labels, "scenes": scenes, "index": {v: i for i, v in enumerate(nodes)}}
 
 
-@pytest.mark.parametrize("cls", [SceneGraph, Inverted])
-def test_arrays_match_a_row_by_row_reading(cls: type[SceneGraph]) -> None:
+@pytest.mark.parametrize("cls", [SceneGraphModel, Inverted])
+def test_arrays_match_a_row_by_row_reading(cls: type[SceneGraphModel]) -> None:
     for seed in range(4):
         g = random_graph(seed, 120, cls)
         ctx = GeometryContext(g, None)
@@ -235,7 +235,7 @@ def test_arrays_match_a_row_by_row_reading(cls: type[SceneGraph]) -> None:
 
 def test_unusual_boxes_fall_back_to_numpy_rules() -> None:
     # attributes set on the live dicts (add_node would have checked them)
-    g = SceneGraph()
+    g = SceneGraphModel()
     for v in ("arr", "scalar_rows", "extra_row", "cent", "none"):
         g.add_node(v)
     g.node_attrs("arr")["bbox"] = np.array([[0.0, 0, 0], [1, 1, 1]])
@@ -247,7 +247,7 @@ def test_unusual_boxes_fall_back_to_numpy_rules() -> None:
     assert ctx.lo.tolist()[:4] == [[0, 0, 0], [0.5] * 3, [0, 0, 0], [4, 5, 6]]
     assert ctx.hi.tolist()[:4] == [[1, 1, 1], [2.0] * 3, [1, 2, 3], [4, 5, 6]]
     assert all(math.isnan(x) for x in ctx.lo[4]) and not ctx.has_box[4]
-    bad = SceneGraph()
+    bad = SceneGraphModel()
     bad.add_node("a")
     bad.node_attrs("a")["bbox"] = (("x", 0, 0), (1, 1, 1))
     with pytest.raises(ValueError):

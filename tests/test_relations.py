@@ -3,16 +3,16 @@ from __future__ import annotations
 import pytest
 
 from sgbelief.errors import ConfigError, UnknownPredicateError
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.query import DEFAULT_REGISTRY, GeometryContext, RelationConfig, RelationRegistry, materialise_relations
 from sgbelief.query.relations import box_distance, Box
 
 import numpy as np
 
 
-def room() -> SceneGraph:
+def room() -> SceneGraphModel:
     """A 6 x 6 m room: desk with a monitor, empty table, chairs, window, bookshelves."""
-    g = SceneGraph()
+    g = SceneGraphModel()
     add = lambda n, lab, lo, hi, **kw: g.add_node(n, bbox=(lo, hi), label=lab, scene="r", **kw)  # noqa: E731
     add("floor", "floor", (-3, -3, -0.01), (3, 3, 0.0))
     add("desk", "desk", (0, 0, 0), (1.2, 0.6, 0.74))
@@ -52,7 +52,7 @@ def test_is_near_class_family():
 
 
 def test_is_near_uses_aliases_and_scene_boundaries():
-    g = SceneGraph()
+    g = SceneGraphModel()
     g.add_node("car", bbox=((0, 0, 0), (4, 2, 1.5)), label="car", scene="a")
     g.add_node("p", bbox=((6, 0, 0), (6.5, 0.5, 1.8)), label="person", scene="a")
     g.add_node("car_b", bbox=((0, 0, 0), (4, 2, 1.5)), label="car", scene="b")
@@ -62,7 +62,7 @@ def test_is_near_uses_aliases_and_scene_boundaries():
 
 
 def test_is_near_committed_labels():
-    g = SceneGraph()
+    g = SceneGraphModel()
     g.add_node("c", bbox=((0, 0, 0), (0.5, 0.5, 0.9)))
     g.add_node("w", bbox=((0.8, 0, 1), (0.9, 1, 2)))
     assert ev(g, "is_near_window", "c") is False
@@ -124,8 +124,8 @@ def test_facing_seating():
     assert ev(g, "is_facing_seating", "shelf", RelationConfig(facing_half_angle_deg=180.0)) is True
 
 
-def outdoor() -> SceneGraph:
-    g = SceneGraph()
+def outdoor() -> SceneGraphModel:
+    g = SceneGraphModel()
     g.add_node("parked", centroid=(0, 0, 0), label="car", scene="d",
                track=[[0, 0.0, 0.0, 0.0], [1, 0.1, 0.0, 0.0], [2, 0.05, 0.1, 0.0]], road_distance_px=12.0)
     g.add_node("moving", centroid=(0, 0, 0), label="car", scene="d",

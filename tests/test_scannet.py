@@ -20,7 +20,7 @@ from sgbelief.adapters.scannet import (  # noqa: E402
 )
 from sgbelief.errors import FormatError  # noqa: E402
 from sgbelief.fusion.channel import GeometricChannel  # noqa: E402
-from sgbelief.graph.scene_graph import SceneGraph  # noqa: E402
+from sgbelief.graph.scene_graph import SceneGraphModel  # noqa: E402
 
 OFFICE = [
     ("floor", (-3, -3, -0.01), (3, 3, 0.0)),
@@ -66,7 +66,7 @@ def test_load_scene_objects(scannet_root):
     assert len(chair.points) == 8
     assert (sc.vertex_object == -1).sum() == 8  # the unannotated box
     assert sc.floor_z == pytest.approx(-0.005)
-    g = SceneGraph()
+    g = SceneGraphModel()
     ids = sc.add_to_graph(g)
     assert ids[3] == "scene0001_00/3"
     a = g.node_attrs("scene0001_00/3")
@@ -83,7 +83,7 @@ def test_load_scenes_and_alt_aggregation_name(scannet_root):
 def test_relations_on_loaded_scene(scannet_root):
     from sgbelief.query import QueryEngine
 
-    g = SceneGraph()
+    g = SceneGraphModel()
     load_scene(scannet_root / "scene0001_00").add_to_graph(g)
     e = QueryEngine(g)
     assert e.geometric("scene0001_00/3", "is_near_window") is True

@@ -18,7 +18,7 @@ from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.config import OperatorConfig
 from sgbelief.fusion.registry import OPERATOR_NAMES
 from sgbelief.graph.persistence import graph_to_dict
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.eval.random_stream import random_records
 from sgbelief.testing import conformance_table, provenance_signature, random_stream
 
@@ -27,7 +27,7 @@ TABLE = conformance_table()
 CONFIG = OperatorConfig(tau_rev=0.02, t_prov=15, t_cor=4, t_disagree=3, calibration={"kappa_min": 0.5})
 
 
-def _state(op: Any, graph: SceneGraph, resolutions: list[Any]) -> list[Any]:
+def _state(op: Any, graph: SceneGraphModel, resolutions: list[Any]) -> list[Any]:
     out = [json.dumps(graph_to_dict(graph), sort_keys=True, default=repr),
            sorted(provenance_signature(graph).items(), key=repr), sorted(op.stats.items()), resolutions]
     if hasattr(op, "calibrator_"):
@@ -44,11 +44,11 @@ def _items(n: int, seed: int) -> list[tuple[Any, FrameLabels]]:
        cuts=st.lists(st.integers(0, 160), max_size=8))
 def test_update_many_equals_update_event_by_event(name: str, seed: int, cuts: list[int]) -> None:
     items = _items(160, seed)
-    one, g_one = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
+    one, g_one = make_operator(name, CONFIG, TABLE), SceneGraphModel(vocabulary=TABLE.predicates, create_nodes=True)
     res_one = []
     for ev, ch in items:
         res_one += one.update(g_one, ev, ch, report=False).resolutions
-    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
+    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraphModel(vocabulary=TABLE.predicates, create_nodes=True)
     res_many = []
     bounds = sorted({0, len(items), *cuts})
     for a, b in zip(bounds, bounds[1:]):
@@ -61,9 +61,9 @@ def test_update_many_equals_update_event_by_event(name: str, seed: int, cuts: li
 def test_update_many_matches_reporting_updates(name: str) -> None:
     """Reports on: the same state, and the reports' resolutions are what update_many returns."""
     items = _items(200, 3)
-    rep, g_rep = make_operator(name, CONFIG, TABLE), SceneGraph(create_nodes=True)
+    rep, g_rep = make_operator(name, CONFIG, TABLE), SceneGraphModel(create_nodes=True)
     res_rep = [r for ev, ch in items for r in rep.update(g_rep, ev, ch).resolutions]
-    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraph(create_nodes=True)
+    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraphModel(create_nodes=True)
     res_many = many.update_many(g_many, iter(items))  # any iterable
     assert _state(many, g_many, res_many) == _state(rep, g_rep, res_rep)
     if name in ("cal", "comod"):
@@ -75,10 +75,10 @@ def test_a_rejected_event_leaves_the_events_before_it_applied(name: str) -> None
     items = _items(60, 7)
     bad = dataclasses.replace(items[40][0], predicate="is_unicorn")
     stream = items[:40] + [(bad, items[40][1])] + items[41:]
-    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
+    many, g_many = make_operator(name, CONFIG, TABLE), SceneGraphModel(vocabulary=TABLE.predicates, create_nodes=True)
     with pytest.raises(UnknownPredicateError):
         many.update_many(g_many, stream)
-    one, g_one = make_operator(name, CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
+    one, g_one = make_operator(name, CONFIG, TABLE), SceneGraphModel(vocabulary=TABLE.predicates, create_nodes=True)
     res_one = []
     for ev, ch in items[:40]:
         res_one += one.update(g_one, ev, ch, report=False).resolutions
@@ -98,20 +98,23 @@ class _ProtocolOnly:
     stats = property(lambda self: self.inner.stats)
     pair_rule = property(lambda self: self.inner.pair_rule)
 
-    def update(self, graph: SceneGraph, event: Any, channel: Any = None, *, report: bool = True) -> Any:
+    def update(self, graph: SceneGraphModel, event: Any, channel: Any = None, *, report: bool = True) -> Any:
         return self.inner.update(graph, event, channel, report=report)
 
-    def update_many(self, graph: SceneGraph, items: Any) -> Any:
+    def update_many(self, graph: SceneGraphModel, items: Any) -> Any:
         return self.inner.update_many(graph, items)
 
-    def tick(self, graph: SceneGraph, t: int) -> Any:
+    def tick(self, graph: SceneGraphModel, t: int) -> Any:
         return self.inner.tick(graph, t)
 
-    def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float:
+    def probability(self, graph: SceneGraphModel, node: Any, predicate: str) -> float:
         return self.inner.probability(graph, node, predicate)
 
-    def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
+    def retract(self, graph: SceneGraphModel, event_id: str) -> list[str]:
         return self.inner.retract(graph, event_id)
+
+    def merge_nodes(self, graph: SceneGraphModel, keep: Any, absorb: Any) -> None:
+        self.inner.merge_nodes(graph, keep, absorb)
 
 
 def test_streaming_replay_in_chunks_names_the_rejected_line(tmp_path: Any) -> None:
@@ -159,19 +162,19 @@ def test_a_subclass_rule_is_what_every_path_applies(engine: str) -> None:
         pair_rule = Flipped()
 
     items = _items(50, 2)
-    one, g_one = Contrarian(CONFIG, TABLE), SceneGraph(create_nodes=True)
+    one, g_one = Contrarian(CONFIG, TABLE), SceneGraphModel(create_nodes=True)
     for ev, ch in items:
         one.update(g_one, ev, ch)
-    many, g_many = Contrarian(CONFIG, TABLE), SceneGraph(create_nodes=True)
+    many, g_many = Contrarian(CONFIG, TABLE), SceneGraphModel(create_nodes=True)
     many.update_many(g_many, items)
     assert _state(many, g_many, []) == _state(one, g_one, [])
-    majority, g_majority = make_operator("majority", CONFIG, TABLE), SceneGraph(create_nodes=True)
+    majority, g_majority = make_operator("majority", CONFIG, TABLE), SceneGraphModel(create_nodes=True)
     majority.update_many(g_majority, items)
     assert provenance_signature(g_majority) != provenance_signature(g_many)
     recs = random_records(2, 600, n_nodes=6, predicates=tuple(TABLE.predicates), labels=("car", None))
     runs = make_runs([Contrarian(CONFIG, TABLE)], TABLE, CONFIG)
     replay(recs, runs, engine=engine)
-    ref, g_ref = Contrarian(CONFIG, TABLE), SceneGraph(vocabulary=TABLE.predicates, create_nodes=True)
+    ref, g_ref = Contrarian(CONFIG, TABLE), SceneGraphModel(vocabulary=TABLE.predicates, create_nodes=True)
     ref.update_many(g_ref, [_to_event(r, i) for i, r in enumerate(recs)])
     assert provenance_signature(runs[0].graph) == provenance_signature(g_ref)
     assert runs[0].operator.stats == ref.stats
@@ -204,7 +207,7 @@ def test_an_operator_without_a_rule_gives_the_clear_error() -> None:
         for run in (lambda op, g: op.update_many(g, [(ok, None), (bad, None)]),
                     lambda op, g: [op.update(g, e, None, report=False) for e in (ok, bad)],
                     lambda op, g: [op.update(g, e, None) for e in (ok, bad)]):
-            op, g = Partial(engine=engine), SceneGraph(create_nodes=True)
+            op, g = Partial(engine=engine), SceneGraphModel(create_nodes=True)
             with pytest.raises(NotImplementedError, match="Partial"):
                 run(op, g)
             assert g.provenance.alpha_beta("a", "is_car") == (1.9, 1.1) and op.stats["events"] == 1

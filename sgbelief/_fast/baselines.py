@@ -31,7 +31,7 @@ from sgbelief.fusion.protocol import (
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.operators.base import BaseOperator
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.graph.scene_graph import SceneGraphModel
 
 _BELOW = Action.BELOW_THRESHOLD
 _COMMITTED = Action.COMMITTED
@@ -43,7 +43,7 @@ class FusedBaselineEngine:
 
     name = "fast"
 
-    def apply(self, op: BaseOperator, graph: SceneGraph, items: Items,
+    def apply(self, op: BaseOperator, graph: SceneGraphModel, items: Items,
               reports: list[UpdateReport] | None) -> list[QueueResolution]:
         return apply_fused(op, graph, items, reports)
 
@@ -58,7 +58,7 @@ class FusedBaselineEngine:
 FUSED_BASELINES = FusedBaselineEngine()
 
 
-def apply_fused(op: BaseOperator, graph: SceneGraph, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
+def apply_fused(op: BaseOperator, graph: SceneGraphModel, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
     """The baselines' step for each (event, channel) in order; appends one report per event to
     ``reports`` (with per-target outcomes) unless it is None. Returns the queue resolutions."""
     report = reports is not None

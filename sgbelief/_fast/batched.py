@@ -51,7 +51,7 @@ from sgbelief.fusion.registry import make_reference_operator
 from sgbelief.graph.compaction import FoldSummary, merge_into_bucket
 from sgbelief.graph.entry_log import EntryLog
 from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 
 
 class Record(Protocol):
@@ -396,7 +396,7 @@ def _first_live_duplicate(cols: EventColumns, ev: np.ndarray, fold_k: np.ndarray
 
 
 # ------------------------------------------------------------------ the store
-def _check_fresh(graph: SceneGraph) -> None:
+def _check_fresh(graph: SceneGraphModel) -> None:
     prov = graph.provenance
     if len(graph.nx) or len(prov) or prov.n_compacted or graph.clock != -1 or graph.meta:
         raise ValueError("batched replay fills an empty graph (no nodes, beliefs, clock or meta yet)")
@@ -437,9 +437,9 @@ def batched_replay(
     config: OperatorConfig | dict[str, Any] | None = None,
     *,
     strict: bool = True,
-    graph: SceneGraph | None = None,
+    graph: SceneGraphModel | None = None,
     timings: dict[str, float] | None = None,
-) -> tuple[SceneGraph, dict[str, int]]:
+) -> tuple[SceneGraphModel, dict[str, int]]:
     """Replay ``cols`` through an operator with a pair rule, in waves; returns (graph, the counters
     of this replay), the map and counters the streaming engine (``operator.update_many``) gives.
 
@@ -459,7 +459,7 @@ def batched_replay(
                          f"(use the streaming engine)")
     cfg = op.config
     if graph is None:
-        graph = SceneGraph(vocabulary=vocabulary if (strict and vocabulary is not None) else None, create_nodes=True)
+        graph = SceneGraphModel(vocabulary=vocabulary if (strict and vocabulary is not None) else None, create_nodes=True)
     else:
         _check_fresh(graph)
         if not graph.create_nodes and cols.n_events and len(cols.pair):  # as check_admissible
@@ -486,7 +486,7 @@ def batched_replay(
     return graph, stats
 
 
-def _replay_waves(cols: EventColumns, rule: PairRule, tau_t: float, schedule: CompactionSchedule, graph: SceneGraph,
+def _replay_waves(cols: EventColumns, rule: PairRule, tau_t: float, schedule: CompactionSchedule, graph: SceneGraphModel,
                   a0: float, b0: float, stats: dict[str, int], lap: _Laps) -> None:
     """The body of :func:`batched_replay` for a non-empty stream: fills ``graph`` and ``stats``."""
     t_ev = np.asarray(cols.event_t, dtype=np.int64)

@@ -28,7 +28,7 @@ from sgbelief.graph.provenance import EntryRecord, EntryStatus, EntryVerdict
 
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.operators.calibrated import CalibratedOperator
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.graph.scene_graph import SceneGraphModel
 
 _COMMITTED = EntryStatus.COMMITTED
 _QUARANTINED = EntryStatus.QUARANTINED
@@ -53,7 +53,7 @@ class FusedCalibratedEngine:
     #: the calibrator's isotonic store under this engine: the incremental merge (same knots as the reference refit)
     isotonic = IncrementalIsotonic
 
-    def apply(self, op: CalibratedOperator, graph: SceneGraph, items: Items,
+    def apply(self, op: CalibratedOperator, graph: SceneGraphModel, items: Items,
               reports: list[UpdateReport] | None) -> list[QueueResolution]:
         return apply_fused(op, graph, items, reports)
 
@@ -70,7 +70,7 @@ FUSED_CALIBRATED = FusedCalibratedEngine()
 
 def apply_fused(
     op: CalibratedOperator,
-    graph: SceneGraph,
+    graph: SceneGraphModel,
     items: Items,
     reports: list[UpdateReport] | None,
 ) -> list[QueueResolution]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 from sgbelief.graph.provenance import ProvenanceEntry
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 
 
 def float_bits(x: Any) -> Any:
@@ -23,7 +23,7 @@ def float_bits(x: Any) -> Any:
     return x
 
 
-def provenance_signature(graph: SceneGraph) -> dict[str, Any]:
+def provenance_signature(graph: SceneGraphModel) -> dict[str, Any]:
     """Everything the equality tests compare, floats bit for bit and every order that is
     observable: beliefs, logs, queues, event index, timeline, compacted-id memory."""
     prov = graph.provenance

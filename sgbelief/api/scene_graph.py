@@ -1,4 +1,4 @@
-"""The public scene graph: the model's :class:`~sgbelief.graph.scene_graph.SceneGraph` with the
+"""The public scene graph: the model's :class:`~sgbelief.graph.scene_graph.SceneGraphModel` with the
 conveniences a user reaches for first.
 
 The model class (Def. 1: nodes, relations, one Beta belief per (node, predicate) and its provenance)
@@ -55,7 +55,7 @@ def provenance_store(engine: str, prior: tuple[float, float] = (PRIOR_ALPHA, PRI
     return make(prior)
 
 
-class SceneGraph(model.SceneGraph):
+class SceneGraph(model.SceneGraphModel):
     """The belief scene graph of :mod:`sgbelief.graph.scene_graph` plus ``save`` / ``load`` /
     ``query``, with the provenance store chosen by ``engine`` ("fast", the default, or "reference").
 

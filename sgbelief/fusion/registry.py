@@ -65,7 +65,11 @@ def require_operator(operator: object) -> FusionOperator:
     """An operator instance given where a name may be: returned unchanged, TypeError otherwise."""
     if isinstance(operator, FusionOperator):
         return operator
-    raise TypeError(f"expected an operator name or a FusionOperator, got {type(operator).__name__}")
+    members = ("name", "config", "stats", "pair_rule", "update", "update_many", "tick", "probability", "retract",
+               "merge_nodes")
+    missing = [m for m in members if not hasattr(operator, m)]
+    hint = f" (it lacks {', '.join(missing)}; see sgbelief.fusion.protocol.FusionOperator)" if missing else ""
+    raise TypeError(f"expected an operator name or a FusionOperator, got {type(operator).__name__}{hint}")
 
 
 def make_reference_operator(

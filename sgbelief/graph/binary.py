@@ -1,4 +1,4 @@
-"""Columnar binary layout of a :class:`SceneGraph`: one uncompressed ``.npz`` (``sgbelief.scene_graph.npz`` v1).
+"""Columnar binary layout of a :class:`SceneGraphModel`: one uncompressed ``.npz`` (``sgbelief.scene_graph.npz`` v1).
 
 The JSON format (:mod:`sgbelief.graph.persistence`) holds the same information, but writing and
 parsing ~200 bytes of JSON per node and per log entry is slow for 10⁶-node maps. Here every
@@ -53,7 +53,7 @@ from sgbelief.graph.npz_columns import ColumnSpec, by_address, decode_values, en
 from sgbelief.graph.npz_provenance import read_provenance
 from sgbelief.graph.npz_provenance_save import provenance_arrays
 from sgbelief.graph.provenance import EntryStatus
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 
 __all__ = ["FORMAT", "VERSION", "save_graph_npz", "load_graph_npz", "graph_to_arrays"]
 
@@ -166,7 +166,7 @@ def _edges(g: nx.MultiDiGraph) -> list[tuple[Any, Any, Any, dict[str, Any]]]:
     return [] if nx.is_empty(g) else list(g.edges(keys=True, data=True))
 
 
-def graph_to_arrays(graph: SceneGraph) -> dict[str, np.ndarray]:
+def graph_to_arrays(graph: SceneGraphModel) -> dict[str, np.ndarray]:
     """The arrays of the binary layout (``header`` included). Raises TypeError / ValueError on
     values the format cannot hold (non-finite floats, unserialisable attributes, bad ids)."""
     from sgbelief.version import __version__
@@ -221,7 +221,7 @@ def graph_to_arrays(graph: SceneGraph) -> dict[str, np.ndarray]:
     return arrays
 
 
-def save_graph_npz(graph: SceneGraph, path: str | Path) -> Path:
+def save_graph_npz(graph: SceneGraphModel, path: str | Path) -> Path:
     """Write ``graph`` as one uncompressed ``.npz`` atomically (temp file, fsync, rename)."""
     path = Path(path)
     with gc_paused():
@@ -235,8 +235,8 @@ def save_graph_npz(graph: SceneGraph, path: str | Path) -> Path:
 
 
 # ======================================================================= loading
-def load_graph_npz(path: str | Path, *, graph_type: type[SceneGraph] = SceneGraph,
-                   loading: GraphLoading = REFERENCE_LOADING) -> SceneGraph:
+def load_graph_npz(path: str | Path, *, graph_type: type[SceneGraphModel] = SceneGraphModel,
+                   loading: GraphLoading = REFERENCE_LOADING) -> SceneGraphModel:
     """Read a graph written by :func:`save_graph_npz`; any malformed, truncated, edited or hostile
     file raises FormatError naming the array or header field (and no graph is returned).
 
@@ -247,7 +247,7 @@ def load_graph_npz(path: str | Path, *, graph_type: type[SceneGraph] = SceneGrap
         return _load(arch, graph_type, loading)
 
 
-def _load(arch: NpzArchive, graph_type: type[SceneGraph], loading: GraphLoading) -> SceneGraph:
+def _load(arch: NpzArchive, graph_type: type[SceneGraphModel], loading: GraphLoading) -> SceneGraphModel:
     h = _read_header(arch)
     c = h.counts
     n = c.nodes

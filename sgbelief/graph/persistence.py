@@ -1,4 +1,4 @@
-"""Lossless, versioned, atomic JSON persistence of a :class:`SceneGraph`.
+"""Lossless, versioned, atomic JSON persistence of a :class:`SceneGraphModel`.
 
 File layout (``format: sgbelief.scene_graph``, ``version: 1``)::
 
@@ -37,7 +37,7 @@ from sgbelief.graph.binary import load_graph_npz, save_graph_npz
 from sgbelief.graph.json_values import jsonable, restore_node_attr
 from sgbelief.graph.loading import REFERENCE_LOADING, GraphLoading
 from sgbelief.graph.provenance_json import store_to_dict
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 
 FORMAT = "sgbelief.scene_graph"
 VERSION = 1
@@ -91,7 +91,7 @@ def _resolve(path: str | Path, format: str | None, *, loading: bool = False) -> 
     return p / GRAPH_FILE, "json"
 
 
-def graph_to_dict(graph: SceneGraph) -> dict[str, Any]:
+def graph_to_dict(graph: SceneGraphModel) -> dict[str, Any]:
     g = graph.nx
     nodes = []
     for n, data in g.nodes(data=True):
@@ -119,7 +119,7 @@ def graph_to_dict(graph: SceneGraph) -> dict[str, Any]:
     }
 
 
-def save_graph(graph: SceneGraph, path: str | Path, *, format: str | None = None) -> Path:
+def save_graph(graph: SceneGraphModel, path: str | Path, *, format: str | None = None) -> Path:
     """Serialise first (so an unserialisable attribute fails before touching disk), then write atomically.
 
     ``format``: ``"json"`` (default) or ``"npz"`` (the binary layout of :mod:`sgbelief.graph.binary`);
@@ -133,8 +133,8 @@ def save_graph(graph: SceneGraph, path: str | Path, *, format: str | None = None
     return target
 
 
-def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>", graph_type: type[SceneGraph] = SceneGraph,
-                    loading: GraphLoading = REFERENCE_LOADING) -> SceneGraph:
+def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>", graph_type: type[SceneGraphModel] = SceneGraphModel,
+                    loading: GraphLoading = REFERENCE_LOADING) -> SceneGraphModel:
     """The graph of a JSON document (:func:`graph_to_dict`); ``graph_type`` / ``loading`` as in
     :func:`load_graph`."""
     try:
@@ -183,8 +183,8 @@ def graph_from_dict(doc: dict[str, Any], *, source: str = "<dict>", graph_type: 
     return graph
 
 
-def load_graph(path: str | Path, *, format: str | None = None, graph_type: type[SceneGraph] = SceneGraph,
-               loading: GraphLoading = REFERENCE_LOADING) -> SceneGraph:
+def load_graph(path: str | Path, *, format: str | None = None, graph_type: type[SceneGraphModel] = SceneGraphModel,
+               loading: GraphLoading = REFERENCE_LOADING) -> SceneGraphModel:
     """Read a saved graph; truncated, edited or hostile files raise FormatError (line / array and field).
 
     A directory holds ``graph.json`` or ``graph.npz``; a file's suffix selects its format unless

@@ -32,9 +32,12 @@ def _as_point(value: Any, name: str) -> tuple[float, float, float]:
     return pt  # type: ignore[return-value]
 
 
-class SceneGraph:
+class SceneGraphModel:
     """Object nodes and relation edges (a networkx ``MultiDiGraph``) with one Beta belief per
-    (node, predicate) backed by a :class:`ProvenanceStore`.
+    (node, predicate) backed by a :class:`ProvenanceStore` (Def. 1): the model every layer above
+    takes. It knows neither files nor queries, and builds the reference store unless given one.
+    Users build :class:`sgbelief.SceneGraph` (``sgbelief.api.scene_graph``), its subclass with
+    save / load / query / explain and the fast store by default.
 
     Node attributes are plain dicts on ``graph.nx.nodes[n]`` (``centroid``, ``bbox``, ``label``
     and anything the user adds); relation edges are keyed by their relation name. Beliefs live
@@ -270,6 +273,20 @@ class SceneGraph:
 
     def __repr__(self) -> str:
         return (
-            f"SceneGraph(nodes={len(self)}, edges={self.nx.number_of_edges()}, "
+            f"SceneGraphModel(nodes={len(self)}, edges={self.nx.number_of_edges()}, "
             f"beliefs={len(self.provenance)})"
         )
+
+
+def __getattr__(name: str) -> Any:
+    # the model's old name; it shared sgbelief.SceneGraph's name but not its default store
+    if name == "SceneGraph":
+        import warnings
+
+        from sgbelief.errors import SgbeliefDeprecationWarning
+
+        warnings.warn("sgbelief.graph.scene_graph.SceneGraph is deprecated (removed in sgbelief 0.2.0): it is "
+                      "SceneGraphModel, the model without files, queries or the fast store; users build "
+                      "sgbelief.SceneGraph", SgbeliefDeprecationWarning, stacklevel=2)
+        return SceneGraphModel
+    raise AttributeError(f"module 'sgbelief.graph.scene_graph' has no attribute {name!r}")

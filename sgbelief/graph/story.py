@@ -32,7 +32,7 @@ from sgbelief.graph.provenance_log import (
     claim_lambda_hat,
     claim_weight,
 )
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 
 __all__ = ["NOT_RECORDED", "NOT_RECORDED_OLD", "STORY_KEY", "FoldedStory", "StoryEvent", "BeliefStory", "explain",
            "render_story"]
@@ -234,7 +234,7 @@ def _sentence(predicate: str, p: float, tau: float, counts: dict[str, int], pend
     return f"Not committed: P = {p:.3f} ≤ τ = {tau:g} ({why})."
 
 
-def explain(graph: SceneGraph, node: Any, predicate: str, *, tau: float = 0.5) -> BeliefStory:
+def explain(graph: SceneGraphModel, node: Any, predicate: str, *, tau: float = 0.5) -> BeliefStory:
     """The story of (node, predicate) in ``graph``: its compacted bucket's summary, then every
     live entry in time order, the counts per status and per verdict, the mean Lambda-hat of the
     claims, and one sentence saying why the pair is or is not committed at ``tau`` (committed

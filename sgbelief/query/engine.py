@@ -9,7 +9,7 @@ of the node's Beta belief (``graph.probability``). Geometric literals come from 
 registry and are authoritative indicators (0 or 1; a negated one is ``1 - indicator``); a
 geometric predicate that cannot be decided (missing attribute, value None) gives 0 in *either*
 polarity. A node is retrieved when ``P > tau`` (strictly above; default 0.5) -- the commit rule of
-``SceneGraph.committed()`` and ``sgbelief inspect``, so a node at the prior 0.5 is never retrieved.
+``SceneGraphModel.committed()`` and ``sgbelief inspect``, so a node at the prior 0.5 is never retrieved.
 
 Candidates: with ``require_evidence=True`` (default) only nodes that have evidence on every
 *positive* belief literal are scored -- a node nobody has made a claim about stays at the prior
@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sgbelief.errors import SgbeliefWarning
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.query.language import Compound, Literal, QueryPredicateError, QuerySyntaxError, parse
 from sgbelief.query.named import UnknownNamedQueryError, find_named_query, suggest_named_queries
 from sgbelief.query.relations import DEFAULT_REGISTRY, GeometryContext, RelationConfig, RelationRegistry
@@ -193,7 +193,7 @@ class QueryEngine:
     The caches assume the graph does not change while the engine is in use (call :meth:`clear`
     after updates)."""
 
-    def __init__(self, graph: SceneGraph, *, registry: RelationRegistry | None = None,
+    def __init__(self, graph: SceneGraphModel, *, registry: RelationRegistry | None = None,
                  config: RelationConfig | None = None, tau: float = 0.5,
                  require_evidence: bool = True, probability: Callable[[Any, str], float] | None = None,
                  use_precomputed: bool = True) -> None:
@@ -431,7 +431,7 @@ class QueryEngine:
         return m
 
 
-def run_query(graph: SceneGraph, expr: str | Compound, tau: float = 0.5, registry: RelationRegistry | None = None, *,
+def run_query(graph: SceneGraphModel, expr: str | Compound, tau: float = 0.5, registry: RelationRegistry | None = None, *,
               config: RelationConfig | None = None, require_evidence: bool = True,
               include_all: bool = False, limit: int | None = None) -> QueryResult:
     """Answer one compound query: ``expr`` is an expression, a :class:`Compound`, or the name /

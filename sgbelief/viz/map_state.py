@@ -20,7 +20,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.viz.style import REFUSED_STATUSES
 
 Point = tuple[float, float, float]
@@ -119,7 +119,7 @@ class MapState:
 
 
 # ------------------------------------------------------------------------------ reading
-def committed_predicates(graph: SceneGraph, node: Any, tau: float = 0.5) -> list[tuple[str, float]]:
+def committed_predicates(graph: SceneGraphModel, node: Any, tau: float = 0.5) -> list[tuple[str, float]]:
     """(predicate, P) for every predicate with P > tau at ``node``, most probable first
     (ties: predicate name)."""
     probs = [(pred, bel.mean) for pred, bel in graph.beliefs(node).items() if bel.mean > tau]
@@ -161,7 +161,7 @@ def _track(value: Any) -> tuple[TrackPoint, ...]:
     return tuple(out) if len({p[1:] for p in out}) > 1 else ()
 
 
-def object_view(graph: SceneGraph, node: Any, tau: float = 0.5, *, box: Box | None = None) -> ObjectView:
+def object_view(graph: SceneGraphModel, node: Any, tau: float = 0.5, *, box: Box | None = None) -> ObjectView:
     """One object: geometry from its attributes (``bbox``, ``centroid``, ``track``) or ``box``
     (which wins), labels from its beliefs. Malformed geometry attributes count as absent."""
     attrs = graph.find_node(node) or {}
@@ -180,7 +180,7 @@ def object_view(graph: SceneGraph, node: Any, tau: float = 0.5, *, box: Box | No
                       tuple(pred for pred, _ in committed), bool(beliefs))
 
 
-def refused_claims(graph: SceneGraph, objects: Mapping[Any, ObjectView] | None = None) -> list[RefusedClaim]:
+def refused_claims(graph: SceneGraphModel, objects: Mapping[Any, ObjectView] | None = None) -> list[RefusedClaim]:
     """Every refused (⊥) claim the provenance holds, in time order (ties: log order)."""
     views = objects or {}
     out = []
@@ -213,7 +213,7 @@ def refused_sites(claims: Iterable[RefusedClaim]) -> list[RefusedSite]:
     return sites
 
 
-def scene_of(graph: SceneGraph, node: Any) -> str | None:
+def scene_of(graph: SceneGraphModel, node: Any) -> str | None:
     """A node's scene: its ``scene`` attribute, else the part of a string id before its first ``/``
     (``d04/0056``, ``scene0000_00/3``), else None. Scenes have their own frames: a picture shows one."""
     scene = (graph.find_node(node) or {}).get("scene")
@@ -222,7 +222,7 @@ def scene_of(graph: SceneGraph, node: Any) -> str | None:
     return node.split("/", 1)[0] if isinstance(node, str) and "/" in node else None
 
 
-def nodes_by_scene(graph: SceneGraph) -> dict[str | None, list[Any]]:
+def nodes_by_scene(graph: SceneGraphModel) -> dict[str | None, list[Any]]:
     """scene -> its nodes (in graph order); nodes without a scene under None."""
     out: dict[str | None, list[Any]] = {}
     for n in graph.nodes():
@@ -230,7 +230,7 @@ def nodes_by_scene(graph: SceneGraph) -> dict[str | None, list[Any]]:
     return out
 
 
-def folded_history(graph: SceneGraph, nodes: Iterable[Any] | None = None) -> tuple[int, int | None]:
+def folded_history(graph: SceneGraphModel, nodes: Iterable[Any] | None = None) -> tuple[int, int | None]:
     """(entries folded into compacted buckets, the latest time a bucket covers) at ``nodes``
     (default: every node): how much history a picture of the map can no longer show."""
     wanted = None if nodes is None else set(nodes)
@@ -242,7 +242,7 @@ def folded_history(graph: SceneGraph, nodes: Iterable[Any] | None = None) -> tup
     return folded, until
 
 
-def map_state(graph: SceneGraph, tau: float = 0.5, *, boxes: Mapping[Any, Box] | None = None,
+def map_state(graph: SceneGraphModel, tau: float = 0.5, *, boxes: Mapping[Any, Box] | None = None,
               nodes: Iterable[Any] | None = None) -> MapState:
     """The picture's content for ``graph`` (every node, or ``nodes``); ``boxes`` (node -> box, e.g.
     from the ScanNet loader) replace the attributes' geometry where given."""

@@ -22,7 +22,7 @@ from collections.abc import Iterable
 from typing import Any
 
 from sgbelief.errors import SgbeliefError
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.viz.map_state import ObjectView, object_view
 from sgbelief.viz.style import (
     EGO_COLOUR, REFUSED_COLOUR, REFUSED_STATUSES, UNCOMMITTED_COLOUR, display_name, format_probability, hex_to_rgb, label_colours,
@@ -154,7 +154,7 @@ class MapLogger:
     def log_text(self, text: str, level: str = "INFO") -> None:
         self._log(self.path("events"), self.rr.TextLog(text, level=level))
 
-    def log_nodes(self, graph: SceneGraph, nodes: Iterable[Any], t: int,
+    def log_nodes(self, graph: SceneGraphModel, nodes: Iterable[Any], t: int,
                   pairs: Iterable[tuple[Any, str]] | None = None) -> None:
         """At time ``t``: the boxes of ``nodes`` (when changed) and the beliefs of ``pairs`` (default:
         every predicate of those nodes)."""
@@ -168,7 +168,7 @@ class MapLogger:
             self.log_belief(node, pred, prov.mean(node, pred))
 
 
-def log_frame(graph: SceneGraph, frame: int, *, recording: Any = None, prefix: str = "sgbelief", tau: float = 0.5,
+def log_frame(graph: SceneGraphModel, frame: int, *, recording: Any = None, prefix: str = "sgbelief", tau: float = 0.5,
               timeline: str = "t") -> int:
     """Log the map as it stands after ``frame`` into ``recording`` (default: the current rerun
     recording): every located object's box with its committed label and P, every belief's mean,

@@ -19,7 +19,7 @@ from typing import Any
 
 from sgbelief.graph.belief import BetaBelief
 from sgbelief.graph.provenance_log import EntryVerdict
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.viz.style import REFUSED_STATUSES
 
 #: the credible level of the trace's interval (the paper's Figure 1(a): 90 %)
@@ -88,7 +88,7 @@ class BeliefTrace:
         return out
 
 
-def belief_trace(graph: SceneGraph, node: Any, predicate: str, *, level: float = TRACE_LEVEL) -> BeliefTrace:
+def belief_trace(graph: SceneGraphModel, node: Any, predicate: str, *, level: float = TRACE_LEVEL) -> BeliefTrace:
     """The trace of ``(node, predicate)`` from ``graph``'s provenance (empty when it has no entry)."""
     prov = graph.provenance
     prior = (prov.prior_alpha, prov.prior_beta)

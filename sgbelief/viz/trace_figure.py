@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.viz.style import STATUS_COLOURS, STATUS_MEANINGS, VERDICT_MARKERS, display_name
 from sgbelief.viz.trace import BeliefTrace, belief_trace
 
@@ -66,7 +66,7 @@ def _panel_title(trace: BeliefTrace, tau: float) -> str:
             f"mean {mean:.3f}: {verdict}")
 
 
-def trace_figure(graph: SceneGraph, node: Any, predicates: Sequence[str] | None = None, *, tau: float = 0.5,
+def trace_figure(graph: SceneGraphModel, node: Any, predicates: Sequence[str] | None = None, *, tau: float = 0.5,
                  title: str | None = None) -> Any:
     """A figure with one panel per predicate of ``node`` (``predicates``, else those with evidence,
     the most eventful first, at most :data:`MAX_PANELS`). Returns the matplotlib Figure."""

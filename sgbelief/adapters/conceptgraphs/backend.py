@@ -34,7 +34,7 @@ BACKGROUND = ("wall", "floor", "ceiling")
 
 
 class ConceptGraphsBackend(MapBeliefs):
-    """Routes every ConceptGraphs detection into a :class:`~sgbelief.graph.scene_graph.SceneGraph`.
+    """Routes every ConceptGraphs detection into a :class:`sgbelief.SceneGraph`.
 
     The default vocabulary is the class list the run uses: ``class_names=``, else the list
     ConceptGraphs loads (read when :meth:`install` has patched its loaders: ``create_or_load_colors``

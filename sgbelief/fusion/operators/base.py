@@ -34,12 +34,12 @@ from sgbelief.graph.retraction import retract
 if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
     from sgbelief.fusion.events import EvidenceEvent
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.graph.scene_graph import SceneGraphModel
 
 _NO_CLAIM = Verdict.NO_CLAIM
 
 
-def check_admissible(graph: SceneGraph, event: EvidenceEvent) -> None:
+def check_admissible(graph: SceneGraphModel, event: EvidenceEvent) -> None:
     """Reject an event before it changes anything in ``graph``. It is inadmissible when
 
     - its predicate is outside the graph's vocabulary (:class:`UnknownPredicateError`);
@@ -74,7 +74,7 @@ class OperatorEngine(Protocol):
 
     name: str
 
-    def apply(self, op: Any, graph: SceneGraph, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]: ...
+    def apply(self, op: Any, graph: SceneGraphModel, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]: ...
 
 
 class ReferenceEngine:
@@ -82,7 +82,7 @@ class ReferenceEngine:
 
     name = "reference"
 
-    def apply(self, op: Any, graph: SceneGraph, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
+    def apply(self, op: Any, graph: SceneGraphModel, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
         return op._apply_reference(graph, items, reports)
 
     def __repr__(self) -> str:
@@ -153,7 +153,7 @@ class BaseOperator:
             held = self._schedule_of = (cfg, CompactionSchedule.of(cfg))
         return held[1]
 
-    def tick(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
+    def tick(self, graph: SceneGraphModel, t: int) -> list[QueueResolution]:
         """Advance to time t: queue timeouts, then a compaction pass (entries older than T_prov are
         folded) on the first tick of each compaction epoch (:class:`CompactionSchedule`)."""
         if t <= graph.clock:
@@ -165,7 +165,7 @@ class BaseOperator:
             self.stats["compacted"] += compact(graph.provenance, schedule.horizon(t))
         return out
 
-    def _timeouts(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
+    def _timeouts(self, graph: SceneGraphModel, t: int) -> list[QueueResolution]:
         """Queue entries that time out at t (the baselines hold no queue)."""
         return []
 
@@ -193,7 +193,7 @@ class BaseOperator:
     # -------------------------------------------------------------- update
     def update(
         self,
-        graph: SceneGraph,
+        graph: SceneGraphModel,
         event: EvidenceEvent,
         channel: GeometricChannel | None = None,
         *,
@@ -209,7 +209,7 @@ class BaseOperator:
         self.engine.apply(self, graph, ((event, channel),), reports)
         return reports[0]
 
-    def update_many(self, graph: SceneGraph, items: Items) -> list[QueueResolution]:
+    def update_many(self, graph: SceneGraphModel, items: Items) -> list[QueueResolution]:
         """Apply (event, channel) pairs in order, exactly as ``update(graph, event, channel,
         report=False)`` on each would (same map, provenance, queues and stats after every event),
         with the per-call set-up done once. Returns the queue resolutions of all the events, in
@@ -219,7 +219,7 @@ class BaseOperator:
         (``pair_rule`` / :meth:`_increment`), not one of the two."""
         return self.engine.apply(self, graph, items, None)
 
-    def _check(self, graph: SceneGraph, event: EvidenceEvent) -> None:
+    def _check(self, graph: SceneGraphModel, event: EvidenceEvent) -> None:
         check_admissible(graph, event)
 
     def _verdict(self, label: str | None, predicate: str, c: float) -> Verdict:
@@ -228,7 +228,7 @@ class BaseOperator:
             return _NO_CLAIM
         return verdict(self.vocabulary.outcome(predicate, label), claim_asserts(c))
 
-    def _apply_reference(self, graph: SceneGraph, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
+    def _apply_reference(self, graph: SceneGraphModel, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
         """The baselines' step for each (event, channel) in order: every target with T(v) > tau_T
         gets the rule's increments (:meth:`_target_increments`), committed; the verdict is only
         reported (baselines ignore it)."""
@@ -265,7 +265,7 @@ class BaseOperator:
         return out
 
     def _target_increments(
-        self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float
+        self, graph: SceneGraphModel, node: Any, predicate: str, c: float, mass: float
     ) -> tuple[float, float] | None:
         """The increments of one target with T(v) > tau_T: the pair rule's, else :meth:`_increment`'s."""
         rule = self.pair_rule
@@ -274,27 +274,27 @@ class BaseOperator:
         prov = graph.provenance
         return rule.increments(c, mass, prov.alpha_beta(node, predicate), (prov.prior_alpha, prov.prior_beta))
 
-    def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float] | None:
+    def _increment(self, graph: SceneGraphModel, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float] | None:
         """The increments (d_alpha, d_beta) of one target, or None when the rule ignores the claim
         (the rule of an operator without ``pair_rule``)."""
         raise NotImplementedError(f"{type(self).__name__} defines neither a pair_rule nor _increment")
 
     # ------------------------------------------------------------ reading
-    def probability(self, graph: SceneGraph, node: Any, predicate: str) -> float:
+    def probability(self, graph: SceneGraphModel, node: Any, predicate: str) -> float:
         """Posterior mean of B(v, phi)."""
         return graph.probability(node, predicate)
 
     # ------------------------------------------------------- user actions
-    def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
+    def retract(self, graph: SceneGraphModel, event_id: str) -> list[str]:
         """Retract an event exactly (cascading to corroborating events within T_cor)."""
         return retract(graph.provenance, event_id, cascade_window=self.config.t_cor)
 
-    def merge_nodes(self, graph: SceneGraph, keep: Any, absorb: Any) -> None:
+    def merge_nodes(self, graph: SceneGraphModel, keep: Any, absorb: Any) -> None:
         """Merge element ``absorb`` into ``keep`` (``graph.merge_nodes``: provenance and beliefs
         move, every entry counted once). The baselines keep nothing per element besides the graph."""
         graph.merge_nodes(keep, absorb)
 
-    def confirm(self, graph: SceneGraph, event_id: str, *, accept: bool = True) -> list[QueueResolution]:
+    def confirm(self, graph: SceneGraphModel, event_id: str, *, accept: bool = True) -> list[QueueResolution]:
         """Explicit operator confirmation of a queued (quarantined or refused) event."""
         out = queues.confirm(graph.provenance, event_id, accept=accept, t=max(graph.clock, 0))
         self._count(out)

@@ -15,7 +15,7 @@ from typing import Any
 from sgbelief.fusion.operators.base import BaseOperator
 from sgbelief.fusion.protocol import LinearRule, ResetRule
 from sgbelief.fusion.rules import claim_asserts
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 
 
 @dataclass(frozen=True)
@@ -116,7 +116,7 @@ class RefinedOperator(BaseOperator):
         cfg = self.config.baselines.refined
         self._window, self._min_support = cfg.window, cfg.min_support
 
-    def _increment(self, graph: SceneGraph, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
+    def _increment(self, graph: SceneGraphModel, node: Any, predicate: str, c: float, mass: float) -> tuple[float, float]:
         key = (node, predicate)
         state = self._windows.get(key)
         if state is None:

@@ -47,7 +47,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from sgbelief.fusion.channel import GeometricChannel
     from sgbelief.fusion.events import EvidenceEvent
     from sgbelief.graph.entry_log import EntryLog
-    from sgbelief.graph.scene_graph import SceneGraph
+    from sgbelief.graph.scene_graph import SceneGraphModel
 
 _CONTRA = Verdict.CONTRADICTS
 _CORR = Verdict.CORROBORATES
@@ -150,7 +150,7 @@ class CalibratedOperator(BaseOperator):
         return self.check_compatibility and not self.observes_geometry
 
     # ------------------------------------------------------------- time
-    def _timeouts(self, graph: SceneGraph, t: int) -> list[QueueResolution]:
+    def _timeouts(self, graph: SceneGraphModel, t: int) -> list[QueueResolution]:
         cfg = self.config
         prov = graph.provenance
         if queues.nothing_expires(prov, t, t_cor=cfg.t_cor, t_disagree=cfg.t_disagree):
@@ -161,7 +161,7 @@ class CalibratedOperator(BaseOperator):
         return out
 
     # ----------------------------------------------------------- update
-    def _apply_reference(self, graph: SceneGraph, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
+    def _apply_reference(self, graph: SceneGraphModel, items: Items, reports: list[UpdateReport] | None) -> list[QueueResolution]:
         """Algorithm 1, step by step, for each (event, channel) in order (the reference path)."""
         out: list[QueueResolution] = []
         for event, channel in items:
@@ -204,7 +204,7 @@ class CalibratedOperator(BaseOperator):
         return out
 
     def _apply_target(
-        self, graph: SceneGraph, event: EvidenceEvent, node: Any, mass: float, y: int | None,
+        self, graph: SceneGraphModel, event: EvidenceEvent, node: Any, mass: float, y: int | None,
         verified: list[tuple[int, str]], label: str | None = None, consensus: MapConsensus | None = None,
     ) -> tuple[Action, Verdict, float, float, list[QueueResolution]]:
         """Alg. 1 lines 4-19 for one target with T(v) > tau_T: (action, verdict, d_alpha, d_beta, resolutions)."""
@@ -303,7 +303,7 @@ class CalibratedOperator(BaseOperator):
             return None
         return self.vocabulary.outcome_tables()[predicate].get(label)
 
-    def _observe_label(self, graph: SceneGraph, event: EvidenceEvent, node: Any, mass: float, label: str) -> None:
+    def _observe_label(self, graph: SceneGraphModel, event: EvidenceEvent, node: Any, mass: float, label: str) -> None:
         """``geometric_evidence: label``: the label is one observation (y = 1) of every other
         predicate it asserts at v (:func:`~sgbelief.fusion.rules.label_observations`), committed
         under the claim's event id; once per (v, psi, t)."""
@@ -381,7 +381,7 @@ class CalibratedOperator(BaseOperator):
             sl = self.pair_conformal_[predicate] = ConformalSlice(self.config.alpha, self.config.calibration.buffer_size)
         return sl
 
-    def prediction_set(self, graph: SceneGraph, node: Any, predicate: str) -> PredictionSet:
+    def prediction_set(self, graph: SceneGraphModel, node: Any, predicate: str) -> PredictionSet:
         """(1 - alpha) prediction set over {0, 1} for y*_{v, phi} (Property 1), or "no coverage claim".
 
         The calibratable regime R: phi is verifiable by the geometric channel (in the subsumption
@@ -416,7 +416,7 @@ class CalibratedOperator(BaseOperator):
         for _prov, consensus in self._consensus.values():
             consensus.frozen = True
 
-    def merge_nodes(self, graph: SceneGraph, keep: Any, absorb: Any) -> None:
+    def merge_nodes(self, graph: SceneGraphModel, keep: Any, absorb: Any) -> None:
         """Merge ``absorb`` into ``keep``: the graph's merge, plus the per-element state: the claim
         counts (the support stratum of keep's next claim counts absorb's claims too), the label
         observations' frame marks and the consensus' claim table."""
@@ -440,7 +440,7 @@ class CalibratedOperator(BaseOperator):
         if cons is not None and cons[0] is prov:
             cons[1].merge_elements(keep, absorb)
 
-    def retract(self, graph: SceneGraph, event_id: str) -> list[str]:
+    def retract(self, graph: SceneGraphModel, event_id: str) -> list[str]:
         """Retract an event exactly (cascading within T_cor); the retracted claims no longer count
         toward their pairs' support."""
         retracted = super().retract(graph, event_id)

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.query.relations.boxes import Box, fill_boxes
 from sgbelief.query.relations.config import RelationConfig
 
@@ -26,11 +26,11 @@ class GeometryContext:
 
     It reads the graph through ``nodes()``, ``predicates()`` and the bulk reads
     ``node_attr_table()`` (every node's attributes, taken once, at the first read) and, for
-    committed labels, ``probabilities(None, predicate)`` (every node's): a subclass of SceneGraph
+    committed labels, ``probabilities(None, predicate)`` (every node's): a subclass of SceneGraphModel
     that changes these is read as it answers.
     """
 
-    def __init__(self, graph: SceneGraph, config: RelationConfig | None = None) -> None:
+    def __init__(self, graph: SceneGraphModel, config: RelationConfig | None = None) -> None:
         self.graph = graph
         self.config = config or RelationConfig()
         self._built = False

@@ -7,14 +7,14 @@ from collections.abc import Iterable
 import numpy as np
 
 from sgbelief.errors import ConfigError
-from sgbelief.graph.scene_graph import SceneGraph
+from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.query.relations.config import RelationConfig
 from sgbelief.query.relations.context import GeometryContext
 
 __all__ = ["materialise_relations"]
 
 
-def materialise_relations(graph: SceneGraph, config: RelationConfig | None = None, *,
+def materialise_relations(graph: SceneGraphModel, config: RelationConfig | None = None, *,
                           relations: Iterable[str] = ("near", "on")) -> int:
     """Add ``near`` (both directions, attr ``distance``) and ``on`` (upper -> lower) edges via
     ``graph.add_relation``; structural nodes (walls, floor, ceiling) are skipped. Returns the number
