@@ -24,7 +24,7 @@ NodeId = str | int
 
 def _as_point(value: Any, name: str) -> tuple[float, float, float]:
     try:
-        pt = tuple(float(x) for x in value)
+        pt = tuple(map(float, value))
     except TypeError as exc:
         raise ValueError(f"{name} must be a sequence of 3 numbers, got {value!r}") from exc
     if len(pt) != 3:

@@ -13,12 +13,15 @@ from __future__ import annotations
 import weakref
 from typing import Any
 
+import numpy as np
+
 from sgbelief.adapters.conceptgraphs import geometry as geo
 from sgbelief.adapters.conceptgraphs.generation_base import (
     NEG_INF,
     BeliefLabelledObject,
     GenerationFunctions,
     as_numpy,
+    candidate_matrix,
     counter_update,
     same_list_type,
 )
@@ -33,8 +36,9 @@ class AliDevGeneration(GenerationFunctions):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        #: (agg_sim, match indices, threshold) of the last match call, read by merge_obj_matches
-        self.last_match: tuple[Any, list, float] | None = None
+        #: (agg_sim, match indices, threshold, agg_sim as a numpy array or None) of the last match
+        #: call, read by merge_obj_matches
+        self.last_match: tuple[Any, list, float, Any] | None = None
         #: node -> the labelled object standing for it in the map list (weak: dropped objects go)
         self.labelled: weakref.WeakValueDictionary[Any, BeliefLabelledObject] = weakref.WeakValueDictionary()
 
@@ -83,14 +87,26 @@ class AliDevGeneration(GenerationFunctions):
         return out
 
     def match_detections_to_objects(self, agg_sim: Any, detection_threshold: float = NEG_INF) -> list[int | None]:
-        """Index of the best object per detection, or None when its best score <= threshold."""
-        out: list[int | None] = []
-        for i in range(agg_sim.shape[0]):
-            if agg_sim[i].max() <= detection_threshold:
-                out.append(None)
-            else:
-                out.append(int(agg_sim[i].argmax().item()))
-        self.last_match = (agg_sim, out, float(detection_threshold))
+        """Index of the best object per detection, or None when its best score <= threshold.
+
+        ConceptGraphs' own loop asks torch for each row's max and argmax; here the matrix is
+        converted once (kept for :meth:`merge_obj_matches`) and reduced row-wise in numpy, in the
+        matrix's own dtype (a float32 score equal to the threshold compares as it does in torch;
+        ties and NaN rows give the first index, as torch's argmax does)."""
+        scores = as_numpy(agg_sim, keep_dtype=True)
+        if scores.ndim != 2 or scores.shape[1] == 0:  # torch's own errors for what it rejects
+            out: list[int | None] = []
+            for i in range(agg_sim.shape[0]):
+                if agg_sim[i].max() <= detection_threshold:
+                    out.append(None)
+                else:
+                    out.append(int(agg_sim[i].argmax().item()))
+            self.last_match = (agg_sim, out, float(detection_threshold), None)
+            return out
+        best = scores.argmax(axis=1).tolist()
+        below = (scores.max(axis=1) <= scores.dtype.type(detection_threshold)).tolist()
+        out = [None if b else j for j, b in zip(best, below)]
+        self.last_match = (agg_sim, out, float(detection_threshold), scores)
         return out
 
     def merge_obj_matches(self, detection_list: Any, objects: Any, match_indices: list, downsample_voxel_size: float,
@@ -107,10 +123,14 @@ class AliDevGeneration(GenerationFunctions):
                            spatial_sim_type: str, device: Any) -> Any:
         backend = self.backend
         last = self.last_match
-        sims = as_numpy(last[0]) if last is not None and last[1] is match_indices else None
+        sims = None
+        if last is not None and last[1] is match_indices:
+            sims = as_numpy(last[0]) if last[3] is None else np.asarray(last[3], dtype=float)
         thr = last[2] if sims is not None else NEG_INF
         n_before = len(objects)
         touched = self.frame_start(objects)
+        # the targeting candidates of every row at once (see MapBeliefs.targets_for)
+        cands = candidate_matrix(sims[:, :n_before], thr) if sims is not None and sims.ndim == 2 else None
         tracker = self.helper("tracker")
         count_before = getattr(tracker, "curr_object_count", 0) if tracker is not None else 0
         for i, j in enumerate(match_indices):
@@ -124,7 +144,8 @@ class AliDevGeneration(GenerationFunctions):
                 touched.add(len(objects) - 1)
                 continue
             if sims is not None:
-                targets = backend.targets_for(sims[i][:n_before], j, objects, thr, touched)
+                targets = backend.targets_for(sims[i][:n_before], j, objects, thr, touched,
+                                              candidates=None if cands is None else cands[i])
             else:
                 targets = {backend.ensure_node(objects[j]): 1.0}
                 touched.add(j)

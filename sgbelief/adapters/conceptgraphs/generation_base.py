@@ -71,10 +71,15 @@ class BeliefLabelledObject(dict):
         return copy.deepcopy(dict(self), memo)
 
 
-def as_numpy(scores: Any) -> np.ndarray:
-    """An association-score matrix (a torch tensor or an array) as a float numpy array."""
+def as_numpy(scores: Any, *, keep_dtype: bool = False) -> np.ndarray:
+    """An association-score matrix (a torch tensor or an array) as a float numpy array (in its own
+    floating dtype with ``keep_dtype``)."""
     if hasattr(scores, "detach"):
         scores = scores.detach().cpu().numpy()
+    if keep_dtype:
+        arr = np.asarray(scores)
+        if arr.dtype.kind == "f":
+            return arr
     return np.asarray(scores, dtype=float)
 
 

@@ -42,8 +42,7 @@ def geometry_summary(obj: Any) -> tuple[Any, Any]:
         # an open3d cloud answers from its own buffers, without a copy into numpy (docs/performance.md)
         if not pcd.has_points():
             return None, None
-        lo, hi, centre = pcd.get_min_bound(), pcd.get_max_bound(), pcd.get_center()
-        return tuple(float(x) for x in centre), (tuple(float(x) for x in lo), tuple(float(x) for x in hi))
+        return _floats(pcd.get_center()), (_floats(pcd.get_min_bound()), _floats(pcd.get_max_bound()))
     if pcd is not None and hasattr(pcd, "points"):
         pts = np.asarray(pcd.points)
     elif obj.get("pcd_np") is not None:
@@ -54,6 +53,14 @@ def geometry_summary(obj: Any) -> tuple[Any, Any]:
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     centroid = tuple(float(x) for x in pts.mean(axis=0))
     return centroid, (tuple(float(x) for x in lo), tuple(float(x) for x in hi))
+
+
+def _floats(values: Any) -> tuple[float, ...]:
+    """A coordinate vector as a tuple of Python floats (``tolist`` of an array: the same floats as
+    ``float()`` of each element, without a generator)."""
+    if type(values) is np.ndarray:
+        return tuple(values.tolist())
+    return tuple(float(x) for x in values)
 
 
 def denoise_dbscan(pcd: Any, eps: float, min_points: int) -> Any:

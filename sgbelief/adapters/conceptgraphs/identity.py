@@ -49,12 +49,28 @@ class IdentityMap:
         self._by_id: dict[int, tuple[dict, str]] = {}
         self._by_fp: dict[Fingerprint, str] = {}
         self._absorbed: dict[str, str] = {}  # absorbed node -> node that absorbed it
+        #: node ids handed out (registered or rebound)
+        self._known: set[str] = set()
+        #: node -> the ``id()`` keys of ``_by_id`` bound to it (retiring a node costs O(its
+        #: objects), not a scan of every entry)
+        self._keys_of: dict[str, set[int]] = {}
+        #: ``obj['id']`` -> its node id (``str(uuid)`` once per uuid, not once per look-up)
+        self._uid_nodes: dict[Any, str] = {}
+
+    def _uid_node(self, uid: Any) -> str:
+        try:
+            return self._uid_nodes[uid]
+        except KeyError:
+            node = self._uid_nodes[uid] = str(uid)
+            return node
+        except TypeError:  # an unhashable id: its string
+            return str(uid)
 
     def lookup(self, obj: dict) -> str | None:
         """Node registered for ``obj`` (resolving tombstones is left to :meth:`resolve`)."""
         uid = obj.get("id") if isinstance(obj, dict) else None
         if uid is not None and not isinstance(uid, (bool, int, float)):
-            node = str(uid)
+            node = self._uid_node(uid)
             return node if node in self._known else None
         entry = self._by_id.get(id(obj))
         if entry is not None and entry[0] is obj:
@@ -68,22 +84,32 @@ class IdentityMap:
         """Give ``obj`` a new node id and remember it."""
         uid = obj.get("id")
         if uid is not None and not isinstance(uid, (bool, int, float)):
-            node = str(uid)
+            node = self._uid_node(uid)
         else:
             node = f"{self._prefix}-{next(self._counter)}"
             while node in self._known:
                 node = f"{self._prefix}-{next(self._counter)}"
-        self._known.add(node)
-        self._by_id[id(obj)] = (obj, node)
-        fp = fingerprint(obj)
-        if fp is not None:
-            self._by_fp.setdefault(fp, node)
+        self._bind(obj, node)
         return node
 
     def rebind(self, obj: dict, node: str) -> None:
         """Remember that ``obj`` (e.g. a replacement dict) stands for ``node``."""
+        self._bind(obj, node)
+
+    def _bind(self, obj: dict, node: str) -> None:
         self._known.add(node)
-        self._by_id[id(obj)] = (obj, node)
+        key = id(obj)
+        old = self._by_id.get(key)
+        if old is not None and old[1] != node:
+            keys = self._keys_of.get(old[1])
+            if keys is not None:
+                keys.discard(key)
+        self._by_id[key] = (obj, node)
+        keys = self._keys_of.get(node)
+        if keys is None:
+            self._keys_of[node] = {key}
+        else:
+            keys.add(key)
         fp = fingerprint(obj)
         if fp is not None:
             self._by_fp.setdefault(fp, node)
@@ -99,25 +125,25 @@ class IdentityMap:
 
     def resolve(self, node: str) -> str:
         """Follow absorption tombstones to the node that holds the evidence now."""
+        absorbed = self._absorbed
+        if node not in absorbed:
+            return node
         seen = set()
-        while node in self._absorbed and node not in seen:
+        while node in absorbed and node not in seen:
             seen.add(node)
-            node = self._absorbed[node]
+            node = absorbed[node]
         return node
 
     def is_absorbed(self, node: str) -> bool:
         return node in self._absorbed
 
-    @property
-    def _known(self) -> set[str]:
-        known = self.__dict__.get("_known_set")
-        if known is None:
-            known = self.__dict__["_known_set"] = set()
-        return known
-
     def _drop_strong_refs(self, node: str, *, keep_tombstone: bool) -> None:
-        for key in [k for k, (_o, n) in self._by_id.items() if n == node]:
-            obj = self._by_id.pop(key)[0]
+        keys = self._keys_of.pop(node, None)
+        if not keys:
+            return
+        by_id = self._by_id
+        for key in keys:  # every tombstone names `node`: the order does not matter
+            obj = by_id.pop(key)[0]
             # keep a fingerprint tombstone so a later look-up of a stale copy still finds the node
             fp = fingerprint(obj)
             if keep_tombstone and fp is not None:

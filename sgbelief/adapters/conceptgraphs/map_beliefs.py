@@ -300,7 +300,7 @@ class MapBeliefs(LabelReader):
             self._detections_per_node[node] += len(claims)
             changed.add(node)
         self._routed_detections += len(claims)
-        if not self._batched:
+        if not (self._batch_open and self._skip_reports and not self.keep_reports):  # not self._batched
             self.flush()
         return n_events
 
