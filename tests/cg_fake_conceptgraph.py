@@ -108,10 +108,17 @@ def install() -> dict[str, types.ModuleType]:
         setattr(pipe, name, getattr(ut, name))
     pipe.merge_detections_to_objects = mp.merge_detections_to_objects
     pipe.MapObjectList, pipe.DetectionList = MapObjectList, DetectionList
+    _SAVED.append({n: sys.modules[n] for n in NAMES if n in sys.modules})
     sys.modules.update(mods)
     return mods
+
+
+#: the modules the stand-ins replaced (a real checkout another test imported), restored by uninstall
+_SAVED: list[dict[str, types.ModuleType]] = []
 
 
 def uninstall() -> None:
     for n in NAMES:
         sys.modules.pop(n, None)
+    if _SAVED:
+        sys.modules.update(_SAVED.pop())
