@@ -88,9 +88,9 @@ class LabelReader:
 
         Among several committed predicates, exclusive classes are ranked by
         :func:`~sgbelief.fusion.rules.exclusive_marginal` (each class's evidence against its
-        rivals' evidence, whatever the order the claims came in), unless the operator couples
-        them itself (``exclusive_evidence: rivals``) or has no Beta beliefs to couple: then by
-        probability. Under independent Betas the mean of a class is the average calibrated
+        rivals' evidence, whatever the order the claims came in), for the method's operators (cal,
+        comod) unless they couple the classes themselves (``exclusive_evidence: rivals``); any
+        other operator ranks by its own probability. Under independent Betas the mean of a class is the average calibrated
         reliability of its claims, whatever their number: an object claimed four times as stool
         and twice as chair would come out chair when the two chair claims were the more confident.
 
@@ -230,8 +230,7 @@ class LabelReader:
         node = self.node_of(obj)
         if node is None or node not in self.graph:
             return None
-        hit = self.committed_class(node)
-        return self.unknown_label if hit is None else hit[1]
+        return self.node_label(node)
 
     def class_id_of(self, obj: Mapping[str, Any]) -> int | None:
         """Class id from the beliefs (``unknown_class_id`` when nothing commits; None if unseen)."""
