@@ -42,18 +42,71 @@ def test_aliases(table: SubsumptionTable) -> None:
 
 
 @pytest.mark.parametrize("name", ["scannet", "kitti360"])
-def test_shipped_vocabularies_are_explicit(name: str) -> None:
+def test_shipped_vocabularies_are_consistent(name: str) -> None:
     raw = yaml.safe_load(config_path("vocab", f"{name}.yaml").read_text())
     labels = set(raw["labels"])
-    for pred, spec in raw["predicates"].items():
-        pos, neg = set(spec["positive"]), set(spec["negative"])
-        assert pos and neg, f"{pred}: both sets must be listed explicitly"
-        assert not pos & neg
-        assert pos | neg <= labels
-        # explicit, not "everything else": some labels stay undecided for every predicate
-        assert labels - pos - neg, f"{pred}: negative set covers every other label"
     t = SubsumptionTable.from_yaml(config_path("vocab", f"{name}.yaml"))
     assert len(t.predicates) >= 8
+    for pred, spec in t.specs.items():
+        pos, neg = set(spec.positive), set(spec.negative)
+        assert pos and neg, pred
+        assert not pos & neg and not pos & set(spec.silent)
+        assert pos | neg | set(spec.silent) <= labels
+        if not raw.get("exhaustive"):  # explicit, not "everything else": some labels stay undecided
+            assert labels - pos - neg, f"{pred}: negative set covers every other label"
+
+
+def test_scannet_labels_are_exhaustive() -> None:
+    """NYU40 gives each object one label: otherprop / otherfurniture / shelves deny a class; only a
+    label an element is set into (a window in a wall, a sink in a counter) is silent."""
+    t = SubsumptionTable.shipped("scannet")
+    assert t.outcome("is_tv", "otherprop") == 0
+    assert t.outcome("is_bed", "otherfurniture") == 0
+    assert t.outcome("is_bookshelf", "shelves") == 0
+    assert t.outcome("is_tv", "television") == 1
+    assert t.outcome("is_window", "wall") is None and t.outcome("is_door", "wall") is None
+    assert t.outcome("is_sink", "counter") is None and t.outcome("is_chair", "counter") == 0
+    for pred, spec in t.specs.items():
+        assert set(spec.positive) | set(spec.negative) | set(spec.silent) == t.labels, pred
+
+
+def test_an_exhaustive_vocabulary_derives_its_negative_sets(tmp_path: Path) -> None:
+    p = tmp_path / "v.yaml"
+    p.write_text("exhaustive: true\nlabels: [chair, sofa, wall, window, otherprop]\npredicates:\n"
+                 "  is_chair: {positive: [chair]}\n  is_window: {positive: [window], silent: [wall]}\n")
+    t = SubsumptionTable.from_yaml(p)
+    assert t.specs["is_chair"].negative == ["sofa", "wall", "window", "otherprop"]  # in label order
+    assert t.specs["is_window"].negative == ["chair", "sofa", "otherprop"]
+    assert t.verdict("is_chair", "otherprop", 0.9) is Verdict.CONTRADICTS
+    assert t.verdict("is_window", "wall", 0.9) is Verdict.NO_CLAIM
+    assert t.exclusive_with("is_chair") == ("is_window",)
+    from sgbelief.eval.sim_config import load_vocabulary
+
+    assert load_vocabulary(str(p))["predicates"]["is_chair"]["negative"] == ["sofa", "wall", "window", "otherprop"]
+
+
+@pytest.mark.parametrize(("text", "match"), [
+    ("exhaustive: true\nlabels: [a, b]\npredicates:\n  is_a: {positive: [a], negative: [b]}\n",
+     r"is_a.*'negative' is derived"),
+    ("labels: [a, b]\npredicates:\n  is_a: {positive: [a], negative: [b], silent: [b]}\n",
+     r"is_a.*'silent' needs 'exhaustive: true'"),
+    ("exhaustive: true\npredicates:\n  is_a: {positive: [a]}\n", r"'exhaustive: true' needs the channel's 'labels'"),
+    ("exhaustive: true\nlabels: [a, b]\npredicates:\n  is_a: {positive: [a], silent: [c]}\n",
+     r"is_a.*\['c'\] missing from 'labels'"),
+    ("exhaustive: true\nlabels: [a, b]\npredicates:\n  is_a: {positive: [a], silent: [a]}\n",
+     r"\['a'\] are in both the positive and the silent set"),
+])
+def test_mistakes_in_an_exhaustive_vocabulary_are_named(tmp_path: Path, text: str, match: str) -> None:
+    p = tmp_path / "v.yaml"
+    p.write_text(text)
+    with pytest.raises(ConfigError, match=match) as info:
+        SubsumptionTable.from_yaml(p)
+    assert "v.yaml" in str(info.value)
+    from sgbelief.eval.sim_config import load_vocabulary
+
+    if "exhaustive" in text:
+        with pytest.raises(ConfigError, match="v.yaml"):
+            load_vocabulary(str(p))
 
 
 def test_scannet_has_required_predicates() -> None:

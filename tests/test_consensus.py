@@ -21,7 +21,7 @@ from sgbelief import SceneGraph, make_operator
 from sgbelief.calibration.consensus import ConsensusCalibration, fit_cell
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.config import OperatorConfig
-from sgbelief.fusion.consensus import MapConsensus, support_bucket
+from sgbelief.fusion.consensus import MapConsensus, silent_claim_outcome, support_bucket
 from sgbelief.fusion.events import EvidenceEvent
 from sgbelief.fusion.rules import adjudication, consensus_cell, exclusion_increments, standing, targeting
 from sgbelief.graph.provenance import EntryVerdict
@@ -83,6 +83,88 @@ def test_consensus_likelihood_ratio_shrinks_level_by_level() -> None:
     assert kappa == pytest.approx(0.5 + 0.5 * 1.0)
     assert eps_coarse < 0.5  # (the pooled fit needs no clip)
     assert cal.likelihood_ratio(0.6, (7,))[0] == pytest.approx(0.6 / 0.4)  # cold start
+
+
+def test_silent_claim_outcome_takes_a_unanimous_channel_verdict() -> None:
+    """q = n_pos / n_dec where the channel's decisive labels agree, else the posterior."""
+    post = np.array([0.9, 0.9, 0.2, 0.6, 0.7])
+    n_pos = np.array([0.0, 3.0, 2.0, 1.0, 0.0])
+    n_dec = np.array([2.0, 3.0, 2.0, 3.0, 0.0])
+    assert silent_claim_outcome(post, n_pos, n_dec) == pytest.approx([0.0, 1.0, 1.0, 0.6, 0.7])
+
+
+def test_element_outcomes_count_the_channel_labels_per_class() -> None:
+    """Per (element, class): labels that decide the class and those that corroborate it, merged
+    elements counted as one; a label that decides nothing (otherprop here) counts for neither."""
+    table = _table()
+    cons = MapConsensus(OperatorConfig().calibration, frozenset(table.exclusive_predicates()),
+                        table.asserted_tables(), table.outcome_tables())
+    cons.add_claim("a", "is_tv", "det", 0.7, "cell", False, "e1")
+    cons.add_claim("b", "is_bed", "det", 0.7, "cell", False, "e2")
+    cons.add_claim("c", "is_tv", "det", 0.7, "cell", False, "e3")
+    for t, lab in enumerate(["tv", "tv", "otherprop"]):
+        cons.add_label("a", t, lab)
+    cons.add_label("b", 0, "bed")
+    cons.add_label("c", 0, "chair")
+    cons.merge_elements("a", "c")  # c's chair label is a's now
+    probas = cons.fit_consensus()
+    n_pos, n_dec = cons._element_outcomes(probas.shape[0])
+    a, b, tv, bed = cons.task_of("a"), cons.task_of("b"), cons.class_of("is_tv"), cons.class_of("is_bed")
+    assert (n_pos[a, tv], n_dec[a, tv]) == (2, 3)  # tv, tv for; chair against; otherprop silent
+    assert (n_pos[a, bed], n_dec[a, bed]) == (0, 3)
+    assert (n_pos[b, bed], n_dec[b, bed], n_pos[b, tv], n_dec[b, tv]) == (1, 1, 0, 1)
+    off = MapConsensus(OperatorConfig(calibration={"consensus": {"adjudicated_elements": "consensus"}}).calibration,
+                       frozenset(table.exclusive_predicates()), table.asserted_tables(), table.outcome_tables())
+    assert off.outcomes is None
+
+
+def _monitor_stream(seed: int, n: int = 12, claims: int = 30, see: float = 0.15):
+    """TVs (channel label tv) and monitors (channel label otherprop, which denies is_tv in an
+    exhaustive table), each claimed 'tv' ``claims`` times at the same confidences; the channel sees
+    an element a fraction ``see`` of the times it is claimed. Clutter the channel never sees gets
+    one or two scattered claims: to the map-wide consensus a repeated 'tv' claim is then strong
+    evidence of a tv, and a monitor's thirty claims outweigh its few otherprop labels."""
+    rng = random.Random(seed)
+    items = []
+    for i in range(claims * 2 * n):
+        v = rng.randrange(2 * n)
+        node, lab = (f"tv{v}", "tv") if v < n else (f"mon{v - n}", "otherprop")
+        ev = EvidenceEvent({node: 1.0}, "is_tv", rng.uniform(0.55, 0.9), "det", i, f"e{i}")
+        items.append((ev, {node: lab if rng.random() < see else None}))
+        if i % 4 == 0:
+            c = f"clutter{rng.randrange(4 * n)}"
+            ev = EvidenceEvent({c: 1.0}, f"is_{rng.choice(CLASSES)}", rng.uniform(0.55, 0.9), "det", i, f"c{i}")
+            items.append((ev, {c: None}))
+    return items
+
+
+def _exhaustive_table() -> SubsumptionTable:
+    labels = [*CLASSES, "otherprop"]
+    specs = {f"is_{k}": {"positive": [k], "negative": [j for j in labels if j != k]} for k in CLASSES}
+    return SubsumptionTable(specs, name="five-exhaustive", labels=labels)
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_claims_unseen_at_an_element_the_channel_denies_elsewhere_do_not_commit(engine: str) -> None:
+    """A monitor the channel labels otherprop whenever it sees it (15 % of its claims) is not a tv: the
+    claims that arrive while the channel looks elsewhere take that verdict as their consensus outcome
+    (not the Dawid-Skene posterior, which follows the claims). Seeded; tolerance: at most 2 of 12
+    monitors commit, at least 11 of 12 TVs; the posterior-only setting commits more monitors."""
+    from sgbelief.fusion.channel import FrameLabels
+
+    def run(adjudicated: str):
+        cfg = {"calibration": {"consensus": {"adjudicated_elements": adjudicated}}}
+        op = make_operator("comod", cfg, _exhaustive_table(), engine=engine)
+        g = SceneGraph(create_nodes=True)
+        op.update_many(g, [(ev, FrameLabels(labels)) for ev, labels in _monitor_stream(5)])
+        mon = sum(g.probability(f"mon{i}", "is_tv") > 0.5 for i in range(12))
+        tvs = sum(g.probability(f"tv{i}", "is_tv") > 0.5 for i in range(12))
+        return mon, tvs
+
+    mon, tvs = run("channel")
+    assert mon <= 2 and tvs >= 11, (mon, tvs)
+    mon_posterior, _ = run("consensus")
+    assert mon_posterior > mon, (mon_posterior, mon)
 
 
 # ----------------------------------------------------------------------------- streams

@@ -29,6 +29,12 @@ class ConsensusConfig(BaseModel):
     bins: int = Field(4, ge=1, description="confidence bins per context (by rank) for the Dawid-Skene workers")
     smoothing: float = Field(0.5, ge=0.0, description="Dirichlet pseudo-count of the Dawid-Skene M-step")
     n_iter: int = Field(50, ge=1, description="EM iterations at most per refit")
+    adjudicated_elements: Literal["channel", "consensus"] = Field(
+        "channel",
+        description="outcome of a silent claim on an element the channel labelled decisively at other times: the "
+        "channel's verdict when its decisive labels there agree (channel, default; docs/method.md §8), or the "
+        "Dawid-Skene posterior like any other silent claim (consensus)",
+    )
 
 
 class CalibrationConfig(BaseModel):

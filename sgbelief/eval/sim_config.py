@@ -10,6 +10,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from sgbelief.errors import ConfigError
+from sgbelief.fusion.compatibility import VocabularyFile
 from sgbelief.resources import config_dir
 
 _M = TypeVar("_M", bound=BaseModel)
@@ -247,6 +248,13 @@ def load_vocabulary(name_or_path: str) -> dict[str, Any]:
     version = doc.get("version", 1)
     if type(version) is not int or version != 1:
         raise ConfigError(f"{p}: key 'version': unsupported version {version!r} (this sgbelief reads 1)")
+    if doc.get("exhaustive"):  # negative sets are derived from the labels: the validated file spells them out
+        try:
+            doc = VocabularyFile.model_validate(doc).model_dump()
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            where = ".".join(str(x) for x in err["loc"])
+            raise ConfigError(f"{p}: key '{where}': {err['msg'].removeprefix('Value error, ')}") from None
     return doc
 
 

@@ -61,18 +61,28 @@ VOCABULARY_VERSION = 1
 
 
 class PredicateSpec(BaseModel):
+    """One predicate of a vocabulary file: the channel labels that corroborate it (``positive``),
+    contradict it (``negative``) and the detector class names that assert it (``aliases``).
+
+    In an exhaustive vocabulary (:attr:`VocabularyFile.exhaustive`) ``negative`` is not written: it is
+    every label outside ``positive`` and ``silent``. ``silent`` lists the labels that may bear a
+    positive element without naming it (a window is set into a ``wall``): they decide nothing.
+    """
+
     model_config = ConfigDict(extra="forbid", frozen=True)
     positive: list[str] = Field(default_factory=list)
     negative: list[str] = Field(default_factory=list)
+    silent: list[str] = Field(default_factory=list)
     aliases: list[str] = Field(default_factory=list)
 
     @model_validator(mode="after")
     def _disjoint(self) -> PredicateSpec:
         if not self.positive and not self.negative:
             raise ValueError("a predicate needs a positive or a negative label set")
-        both = set(self.positive) & set(self.negative)
-        if both:
-            raise ValueError(f"labels {sorted(both)} are in both the positive and the negative set")
+        for other, name in ((self.negative, "negative"), (self.silent, "silent")):
+            both = set(self.positive) & set(other)
+            if both:
+                raise ValueError(f"labels {sorted(both)} are in both the positive and the {name} set")
         return self
 
 
@@ -82,6 +92,9 @@ class VocabularyFile(BaseModel):
     version: int = Field(VOCABULARY_VERSION, strict=True)
     name: str = "vocabulary"
     labels: list[str] | None = None
+    #: the channel gives each element exactly one label of ``labels`` (NYU40, Cityscapes): a label
+    #: outside a predicate's positive and silent sets denies it, so negative sets are derived
+    exhaustive: bool = False
     predicates: dict[str, PredicateSpec]
 
     @field_validator("version")
@@ -106,9 +119,29 @@ class VocabularyFile(BaseModel):
         if self.labels is not None:
             known = set(self.labels)
             for pred, spec in self.predicates.items():
-                unknown = (set(spec.positive) | set(spec.negative)) - known
+                unknown = (set(spec.positive) | set(spec.negative) | set(spec.silent)) - known
                 if unknown:
                     raise ValueError(f"predicate {pred!r} uses labels {sorted(unknown)} missing from 'labels'")
+        return self
+
+    @model_validator(mode="after")
+    def _derive_negatives(self) -> VocabularyFile:
+        """exhaustive: negative(phi) = labels - positive(phi) - silent(phi), in label order."""
+        if not self.exhaustive:
+            for pred, spec in self.predicates.items():
+                if spec.silent:
+                    raise ValueError(f"predicate {pred!r}: 'silent' needs 'exhaustive: true' (otherwise every "
+                                     "label outside 'positive' and 'negative' is already silent)")
+            return self
+        if not self.labels:
+            raise ValueError("'exhaustive: true' needs the channel's 'labels' (negative sets are derived from them)")
+        for pred, spec in self.predicates.items():
+            if spec.negative:
+                raise ValueError(f"predicate {pred!r}: 'negative' is derived in an exhaustive vocabulary "
+                                 "(every label outside 'positive' and 'silent'); list exceptions under 'silent'")
+            keep = set(spec.positive) | set(spec.silent)
+            derived = [lab for lab in self.labels if lab not in keep]
+            self.predicates[pred] = spec.model_copy(update={"negative": derived})
         return self
 
 

@@ -24,8 +24,10 @@ refits over a stream) it refits, in one batch over the whole table:
    many claims it received, bucketed: stray detections on clutter are rarely repeated) or the
    geometric channel, whose every label (``otherprop`` included) is an observation with a learned
    confusion;
-2. the consensus outcome of each silent claim, q_v(phi), and from those the per-cell isotonic
-   calibration (:class:`~sgbelief.calibration.consensus.ConsensusCalibration`).
+2. the consensus outcome of each silent claim, q_v(phi) (:func:`silent_claim_outcome`: the
+   channel's own verdict where it labelled the element decisively at other times and always the
+   same way, else the Dawid–Skene posterior), and from those the per-cell isotonic calibration
+   (:class:`~sgbelief.calibration.consensus.ConsensusCalibration`).
 
 The operator asks :meth:`MapConsensus.likelihood_ratio` for a silent claim's (Lambda_hat,
 kappa_hat); until the first refit it answers None and the operator uses §4.1's calibrator as before.
@@ -44,7 +46,7 @@ from sgbelief.calibration.config import CalibrationConfig
 from sgbelief.calibration.consensus import ConsensusCalibration
 from sgbelief.calibration.dawid_skene import NONE_CLASS, DawidSkene
 
-__all__ = ["MapConsensus", "GEOMETRIC_WORKER", "SUPPORT_WORKER", "support_bucket"]
+__all__ = ["MapConsensus", "GEOMETRIC_WORKER", "SUPPORT_WORKER", "silent_claim_outcome", "support_bucket"]
 
 #: the Dawid–Skene worker name of the geometric channel
 GEOMETRIC_WORKER = "<geometric>"
@@ -63,6 +65,23 @@ def support_bucket(n: int) -> int:
         if n >= edge:
             b = i
     return b
+
+
+def silent_claim_outcome(posterior: np.ndarray, n_positive: np.ndarray, n_decisive: np.ndarray) -> np.ndarray:
+    """The consensus outcome q_v(phi) of claims the channel did not adjudicate when they arrived (docs/method.md §8).
+
+    q = n_pos / n_dec  where the channel's decisive labels of v for phi are unanimous
+                       (n_dec > 0 and n_pos in {0, n_dec}): the channel's verdict, given at another time;
+    q = P(z_v = phi | everything)  otherwise: the Dawid–Skene posterior.
+
+    The channel is the one source whose errors the calibration does not have to learn from the map;
+    where it spoke about v decisively and never changed its mind, a claim that arrived while it was
+    looking elsewhere (or at a silent label) has the same truth as the claims it adjudicated.
+    Where its labels disagree (a monitor labelled otherprop, once television) the posterior decides.
+    All arguments are arrays of one shape, one entry per silent claim.
+    """
+    unanimous = (n_decisive > 0) & ((n_positive == 0) | (n_positive == n_decisive))
+    return np.where(unanimous, n_positive / np.maximum(n_decisive, 1), posterior)
 
 
 class _Codes:
@@ -86,12 +105,16 @@ class MapConsensus:
     """Claim table, channel labels and the consensus calibration of one map (see the module docstring)."""
 
     def __init__(self, config: CalibrationConfig, exclusive: frozenset[str],
-                 asserted: Mapping[str, tuple[str, ...]] | None = None) -> None:
+                 asserted: Mapping[str, tuple[str, ...]] | None = None,
+                 outcomes: Mapping[str, Mapping[str, int]] | None = None) -> None:
         cc = config.consensus
         self.every, self.growth, self.bins = cc.every, cc.growth, cc.bins
         self.exclusive = exclusive
         #: label -> the predicates it asserts (the vocabulary's positive sets): a label's initial vote
         self.asserted = asserted or {}
+        #: predicate -> {label: y}: the channel's verdicts (the vocabulary's outcome tables); with
+        #: ``adjudicated_elements: channel`` a unanimous verdict is a silent claim's outcome
+        self.outcomes = outcomes if cc.adjudicated_elements == "channel" else None
         self._ds = DawidSkene(n_iter=cc.n_iter, smoothing=cc.smoothing, none_class=True)
         self.calibration = ConsensusCalibration(config.target_size, config.kappa_min, config.lr_max, config.cold_start)
         # codes of elements (the Dawid-Skene tasks), classes, contexts, cells and channel labels
@@ -246,10 +269,38 @@ class MapConsensus:
             return
         cls = np.asarray(self.cls, dtype=np.int64)[silent]
         cell = np.asarray(self.cell_code, dtype=np.int64)[silent]
-        q = probas[self._row_of_code[np.asarray(self.task, dtype=np.intp)[silent]], cls]
+        rows = self._row_of_code[np.asarray(self.task, dtype=np.intp)[silent]]
+        q = probas[rows, cls]
+        if self.outcomes is not None:
+            n_pos, n_dec = self._element_outcomes(probas.shape[0])
+            q = silent_claim_outcome(q, n_pos[rows, cls], n_dec[rows, cls])
         c = np.asarray(self.conf)[silent]
         levels = [cell * _MAX_CLASSES + cls, cell, np.asarray(self.ctx_code, dtype=np.int64)[silent]]
         self.calibration.fit(levels, c, q)
+
+    def _element_outcomes(self, n_rows: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per (posterior row, class): how many of the channel's labels of the element decide the
+        class (n_dec) and how many of those corroborate it (n_pos); rows as in :meth:`fit_consensus`."""
+        k = len(self._classes.names)
+        n_pos, n_dec = np.zeros((n_rows, k)), np.zeros((n_rows, k))
+        if not self.labels or self.outcomes is None:
+            return n_pos, n_dec
+        # y of each label code for each class: 1, 0, or -1 (decides nothing)
+        y = np.full((len(self._labels.names), k), -1, dtype=np.int8)
+        for j, pred in enumerate(self._classes.names):
+            table = self.outcomes.get(pred, {})
+            for i, label in enumerate(self._labels.names):
+                v = table.get(label)
+                if v is not None:
+                    y[i, j] = v
+        row, idx = self._row_of_code, self._tasks.index
+        pairs = np.array([(row[c], code) for (node, _t), code in self.labels.items()
+                          if 0 <= (c := idx.get(node, -1)) < len(row) and row[c] >= 0], dtype=np.intp).reshape(-1, 2)
+        if len(pairs):
+            ys = y[pairs[:, 1]]  # (labels, classes)
+            np.add.at(n_dec, pairs[:, 0], (ys >= 0).astype(float))
+            np.add.at(n_pos, pairs[:, 0], (ys == 1).astype(float))
+        return n_pos, n_dec
 
     def fit_consensus(self) -> np.ndarray:
         """The Dawid–Skene posterior over classes (+ none) per element (rows: task codes, columns:

@@ -274,8 +274,10 @@ class CalibratedOperator(BaseOperator):
         held = self._consensus.get(id(prov))
         if held is None or held[0] is not prov or held[1].exclusive is not self.consensus_classes:
             # (a new vocabulary starts a new consensus: its latent classes are the vocabulary's)
+            vocab = self.vocabulary
             held = self._consensus[id(prov)] = (prov, MapConsensus(self.config.calibration, self.consensus_classes,
-                                                                      self.vocabulary.asserted_tables()))  # type: ignore[union-attr]
+                                                                      vocab.asserted_tables(),  # type: ignore[union-attr]
+                                                                      vocab.outcome_tables()))  # type: ignore[union-attr]
             held[1].frozen = self._consensus_frozen
         return held[1]
 
