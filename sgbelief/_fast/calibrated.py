@@ -106,6 +106,7 @@ def apply_fused(
     rivals_of = op.vocabulary.exclusive_with if op.excludes_rivals else None  # type: ignore[union-attr]
     exclusive_with = op.vocabulary.exclusive_with if consensus_classes else None  # type: ignore[union-attr]
     tick = op.tick
+    memory = op._label_memory_of(prov) if op.recalls_verdicts else None  # recalled verdicts (fusion.label_memory)
     out: list[QueueResolution] = []
     n_events = n_targets = n_below = n_committed = n_quarantined = n_refused = 0
     try:
@@ -131,6 +132,7 @@ def apply_fused(
             if channel is not None and outcome_of is not None:
                 label_of = channel.labels.get if type(channel) is FrameLabels else channel.label
             frame = label_of is not None and type(channel) is FrameLabels
+            recall_of = tables.get(pred) if memory is not None else None  # type: ignore[union-attr]
             raw_pos = c >= 0.5
             e_targets = e_below = e_committed = e_quarantined = e_refused = 0
             # per stratum of this event: (context, Lambda_hat, kappa_hat), computed on first use
@@ -142,10 +144,13 @@ def apply_fused(
                 e_targets += 1
                 if mass <= tau_t and not report:
                     e_below += 1
-                    if cons is not None and label_of is not None:  # the channel still saw v
+                    if label_of is not None and (cons is not None or memory is not None):  # the channel still saw v
                         lab = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
                         if lab is not None:
-                            cons.add_label(node, t, lab)
+                            if cons is not None:
+                                cons.add_label(node, t, lab)
+                            if memory is not None:
+                                memory.add(node, t, lab)
                     continue
                 label = None
                 if label_of is None:
@@ -153,6 +158,8 @@ def apply_fused(
                 else:
                     label = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
                     y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
+                    if memory is not None and label is not None:
+                        memory.add(node, t, label)
                 key = (node, pred)
                 log = pairs_get(key)
                 if n_strata > 1:
@@ -196,6 +203,10 @@ def apply_fused(
                 claim_pos = (lam > 1.0) if (cal_sign and lam != 1.0) else raw_pos
                 if y is None:
                     verdict, code = _NO_CLAIM, _E_NO_CLAIM
+                    if recall_of is not None:  # the element's earlier labels (rules.recalled_outcome): only ⊥ acts
+                        y_rec = memory.recalled(node, recall_of)  # type: ignore[union-attr]
+                        if y_rec is not None and (y_rec == 1) != claim_pos:
+                            verdict, code = _CONTRA, _E_CONTRA
                 elif (y == 1) == claim_pos:
                     verdict, code = _CORR, _E_CORR
                 else:

@@ -78,6 +78,13 @@ class OperatorConfig(_Frozen):
         "at the same element (rivals: the Dirichlet coupling of docs/method.md §8) or only about its own predicate (none, "
         "the paper)",
     )
+    recalled_verdicts: Literal["none", "unanimous"] = Field(
+        "unanimous",
+        description="comod: a claim the channel does not adjudicate in its own frame is refused when the labels the "
+        "channel gave its element in earlier frames all contradict it (unanimous, default; docs/method.md §8), or "
+        "only the claim's own frame counts (none, the paper)",
+    )
+    recall_min_labels: int = Field(1, ge=1, description="decisive earlier labels needed before a verdict is recalled")
     verdict_sign: Literal["calibrated", "raw"] = Field(
         "calibrated",
         description="sign of a claim for the verdict: calibrated Lambda_hat > 1 (default, invariant under "
@@ -143,6 +150,7 @@ PAPER_SETTINGS: dict[str, Any] = {
     "geometric_evidence": "none",
     "exclusive_evidence": "none",
     "verdict_sign": "raw",
+    "recalled_verdicts": "none",
     "calibration": {"lr_reference": "slice", "kappa_pooling": "slice", "support_strata": 1,
                     "consensus": {"method": "none"}},
 }

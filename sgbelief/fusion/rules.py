@@ -28,7 +28,7 @@ revision test (KL > tau)    :func:`revision_kl_exceeds` (bound: :func:`kl_upper_
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 from scipy import special as _sp
 
@@ -104,6 +104,31 @@ ENTRY_VERDICT: dict[Verdict, EntryVerdict] = {
     Verdict.CONTRADICTS: EntryVerdict.CONTRADICTS,
     Verdict.NO_CLAIM: EntryVerdict.NO_CLAIM,
 }
+
+
+def recalled_outcome(outcomes: Mapping[str, int], label_counts: Mapping[str, int], min_labels: int = 1) -> int | None:
+    """y recalled from the channel's earlier labels of an element (``recalled_verdicts: unanimous``, docs/method.md §8).
+
+    With n_y the labels of v that the vocabulary maps to outcome y for phi (its ``outcomes`` table):
+
+        y_rec = 1     if n_1 >= min_labels and n_0 = 0
+        y_rec = 0     if n_0 >= min_labels and n_1 = 0
+        y_rec = None  otherwise (never labelled decisively, or the channel changed its mind)
+
+    Labels that decide nothing for phi (absent from ``outcomes``) are not counted.
+    """
+    n1 = n0 = 0
+    for label, n in label_counts.items():
+        y = outcomes.get(label)
+        if y == 1:
+            n1 += n
+        elif y == 0:
+            n0 += n
+    if n1 and not n0:
+        return 1 if n1 >= min_labels else None
+    if n0 and not n1:
+        return 0 if n0 >= min_labels else None
+    return None
 
 
 def support_stratum(n_prior_claims: int, n_strata: int) -> int:

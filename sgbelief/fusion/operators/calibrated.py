@@ -22,6 +22,7 @@ from sgbelief.fusion.config import OperatorConfig, paper_variant, resolve_config
 from sgbelief.fusion.operators.base import BaseOperator, OperatorEngine
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.consensus import MapConsensus
+from sgbelief.fusion.label_memory import LabelMemory
 from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_exceeds: re-exported)
     ENTRY_VERDICT,
     adjudication,
@@ -102,6 +103,8 @@ class CalibratedOperator(BaseOperator):
         self._label_seen: dict[int, tuple[EntryLog, dict[tuple[Any, str], int]]] = {}
         #: the map-wide consensus (claim table, labels, its calibration) per provenance store
         self._consensus: dict[int, tuple[EntryLog, MapConsensus]] = {}
+        #: the channel's labels of each element so far, per provenance store (recalled verdicts)
+        self._memory: dict[int, tuple[EntryLog, LabelMemory]] = {}
         #: freeze_calibration() also stops the consensus' refits
         self._consensus_frozen = False
         # the vocabulary whose exclusive classes ``consensus_classes`` holds (see there)
@@ -137,6 +140,11 @@ class CalibratedOperator(BaseOperator):
         return held[1]
 
     @property
+    def recalls_verdicts(self) -> bool:
+        """comod refuses a claim its element's earlier labels unanimously contradict (``recalled_verdicts``)."""
+        return self.check_compatibility and self.config.recalled_verdicts != "none" and self.vocabulary is not None
+
+    @property
     def excludes_rivals(self) -> bool:
         """A committed claim also counts against the classes that exclude it (``exclusive_evidence: rivals``)."""
         return self.config.exclusive_evidence == "rivals" and self.vocabulary is not None
@@ -170,12 +178,16 @@ class CalibratedOperator(BaseOperator):
             consensus = self._consensus_of(graph.provenance) if event.predicate in self.consensus_classes else None
             if consensus is not None and consensus.due():  # batched: never per event over the map
                 consensus.refit()
+            memory = self._label_memory_of(graph.provenance) if self.recalls_verdicts else None
+            recall_table = self.vocabulary.outcome_tables().get(event.predicate) if memory is not None else None  # type: ignore[union-attr]
             outcomes: list[TargetOutcome] = []
             verified: list[tuple[int, str]] = []  # (y, calibration context) for step 5
             tally: Counter[Action] = Counter()  # targets per action (below tau_T, committed, quarantined, refused)
             for node, mass in event.targets.items():
                 label = self._geometric_label(channel, node, event)
                 y = self._outcome(event.predicate, label)
+                if memory is not None and label is not None:
+                    memory.add(node, event.t, label)
                 if mass <= self.config.tau_t:  # discarded; its verdict is only reported
                     tally[Action.BELOW_THRESHOLD] += 1
                     if consensus is not None and label is not None:  # the channel still saw v
@@ -189,7 +201,9 @@ class CalibratedOperator(BaseOperator):
                     self._observe_label(graph, event, node, mass, label)
                 if consensus is not None and label is not None:
                     consensus.add_label(node, event.t, label)
-                action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified, label, consensus)
+                recalled = memory.recalled(node, recall_table) if recall_table is not None and y is None else None  # type: ignore[union-attr]
+                action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified, label, consensus,
+                                                            recalled)
                 resolutions += res
                 tally[action] += 1
                 outcomes.append(TargetOutcome(node, mass, v, action, da, db))
@@ -206,8 +220,11 @@ class CalibratedOperator(BaseOperator):
     def _apply_target(
         self, graph: SceneGraphModel, event: EvidenceEvent, node: Any, mass: float, y: int | None,
         verified: list[tuple[int, str]], label: str | None = None, consensus: MapConsensus | None = None,
+        recalled: int | None = None,
     ) -> tuple[Action, Verdict, float, float, list[QueueResolution]]:
-        """Alg. 1 lines 4-19 for one target with T(v) > tau_T: (action, verdict, d_alpha, d_beta, resolutions)."""
+        """Alg. 1 lines 4-19 for one target with T(v) > tau_T: (action, verdict, d_alpha, d_beta, resolutions).
+        ``recalled``: the outcome the element's earlier labels agree on when this frame's label decides
+        nothing (only its ⊥ counts: the claim is refused; it is not a calibration outcome)."""
         cfg, prov, pred = self.config, graph.provenance, event.predicate
         n_strata = cfg.calibration.support_strata
         stratum = support_stratum(self._next_claim(prov, node, pred), n_strata)
@@ -215,6 +232,8 @@ class CalibratedOperator(BaseOperator):
         lam, kappa = self._likelihood_ratio(event, context, stratum, node, mass, y, label, consensus)  # Eq. 2
         asserts = claim_asserts(event.confidence, lam if cfg.verdict_sign == "calibrated" else None)
         v = verdict(y, asserts)
+        if recalled is not None and y is None and verdict(recalled, asserts) is _CONTRA:
+            v = _CONTRA
         code, c = ENTRY_VERDICT[v], event.confidence  # what each entry records of the event
         a, b = prov.alpha_beta(node, pred)
         resolutions: list[QueueResolution] = []
@@ -355,6 +374,13 @@ class CalibratedOperator(BaseOperator):
                 n += 1
         return n
 
+    def _label_memory_of(self, prov: EntryLog) -> LabelMemory:
+        """The channel's labels of each element, per provenance store (created on first use)."""
+        held = self._memory.get(id(prov))
+        if held is None or held[0] is not prov:
+            held = self._memory[id(prov)] = (prov, LabelMemory(self.config.recall_min_labels))
+        return held[1]
+
     def _label_seen_of(self, prov: EntryLog) -> dict[tuple[Any, str], int]:
         """(v, psi) -> the last time a label observation was recorded there, per provenance store."""
         held = self._label_seen.get(id(prov))
@@ -441,6 +467,9 @@ class CalibratedOperator(BaseOperator):
         cons = self._consensus.get(id(prov))
         if cons is not None and cons[0] is prov:
             cons[1].merge_elements(keep, absorb)
+        memory = self._memory.get(id(prov))
+        if memory is not None and memory[0] is prov:
+            memory[1].merge(keep, absorb)
 
     def retract(self, graph: SceneGraphModel, event_id: str) -> list[str]:
         """Retract an event exactly (cascading within T_cor); the retracted claims no longer count

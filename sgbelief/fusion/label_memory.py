@@ -1,0 +1,63 @@
+"""What the geometric channel has said about each element so far: its labels, once per (element, time).
+
+A claim is adjudicated by the label its element bears in the claim's own frame. A mesh-label or
+panoptic channel sees a targeted element only part of the time, so many claims arrive while it
+looks elsewhere, yet it may have labelled that element, decisively and always the same way, in
+other frames. :class:`LabelMemory` keeps those labels per map (one per provenance store, like the
+support counts) and :func:`~sgbelief.fusion.rules.recalled_outcome` reads the outcome they agree on.
+``comod`` refuses a claim the recalled outcome contradicts (``recalled_verdicts: unanimous``,
+docs/method.md §8); nothing is written for it but the refused entry, so Eq. 4 and exact retraction
+hold as for any refusal.
+
+A label is an observation of the channel, not part of a claim: retracting the claim it came with
+does not unsee it. Labels of claims below the targeting threshold tau_T count too (the channel
+still saw the element). Per label O(1); per claim, O(distinct labels of the element).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from sgbelief.fusion.rules import recalled_outcome
+
+__all__ = ["LabelMemory"]
+
+
+class LabelMemory:
+    """Per element: how many times (distinct frames) the channel gave it each label."""
+
+    __slots__ = ("counts", "_last_t", "min_labels")
+
+    def __init__(self, min_labels: int = 1) -> None:
+        #: element -> {label: frames it bore that label}
+        self.counts: dict[Any, dict[str, int]] = {}
+        self._last_t: dict[Any, int] = {}
+        #: decisive labels needed before an outcome is recalled
+        self.min_labels = min_labels
+
+    def add(self, node: Any, t: int, label: str) -> None:
+        """The channel labelled ``node`` ``label`` at time ``t`` (the first label of a frame counts)."""
+        if self._last_t.get(node) == t:
+            return
+        self._last_t[node] = t
+        held = self.counts.get(node)
+        if held is None:
+            held = self.counts[node] = {}
+        held[label] = held.get(label, 0) + 1
+
+    def recalled(self, node: Any, outcomes: Mapping[str, int]) -> int | None:
+        """The outcome the element's labels agree on for a predicate with ``outcomes`` (label -> y), or None."""
+        held = self.counts.get(node)
+        return None if not held else recalled_outcome(outcomes, held, self.min_labels)
+
+    def merge(self, keep: Any, absorb: Any) -> None:
+        """``absorb`` was merged into ``keep``: its labels are keep's."""
+        moved = self.counts.pop(absorb, None)
+        t = self._last_t.pop(absorb, None)
+        if moved:
+            held = self.counts.setdefault(keep, {})
+            for label, n in moved.items():
+                held[label] = held.get(label, 0) + n
+        if t is not None and t > self._last_t.get(keep, -1):
+            self._last_t[keep] = t
