@@ -1,0 +1,108 @@
+"""Recalled verdicts: the channel's earlier labels of an element refuse a claim it does not see
+(``recalled_verdicts: unanimous``, docs/method.md §8): the rule by hand, the memory, the operator."""
+
+from __future__ import annotations
+
+import pytest
+
+from sgbelief import SceneGraph, make_operator
+from sgbelief.fusion.channel import FrameLabels
+from sgbelief.fusion.compatibility import SubsumptionTable
+from sgbelief.fusion.events import EvidenceEvent
+from sgbelief.fusion.label_memory import LabelMemory
+from sgbelief.fusion.rules import recalled_outcome
+from sgbelief.graph.provenance import EntryStatus
+
+CLASSES = ["bed", "chair", "sofa"]
+
+
+def _table() -> SubsumptionTable:
+    labels = [*CLASSES, "otherprop"]
+    specs = {f"is_{k}": {"positive": [k], "negative": [j for j in CLASSES if j != k]} for k in CLASSES}
+    return SubsumptionTable(specs, name="three", labels=labels)  # otherprop decides nothing
+
+
+def test_recalled_outcome_by_hand() -> None:
+    out = {"bed": 1, "chair": 0, "sofa": 0}
+    assert recalled_outcome(out, {"chair": 3}) == 0
+    assert recalled_outcome(out, {"chair": 2, "sofa": 1, "otherprop": 4}) == 0  # silent labels do not count
+    assert recalled_outcome(out, {"bed": 2}) == 1
+    assert recalled_outcome(out, {"bed": 1, "chair": 5}) is None  # the channel changed its mind
+    assert recalled_outcome(out, {"otherprop": 3}) is None
+    assert recalled_outcome(out, {}) is None
+    assert recalled_outcome(out, {"chair": 1}, min_labels=2) is None
+    assert recalled_outcome(out, {"chair": 2}, min_labels=2) == 0
+
+
+def test_label_memory_counts_frames_once_and_follows_merges() -> None:
+    mem = LabelMemory()
+    mem.add("a", 1, "chair")
+    mem.add("a", 1, "bed")  # the same frame again: its first label counts
+    mem.add("a", 2, "chair")
+    mem.add("b", 1, "bed")
+    assert mem.counts == {"a": {"chair": 2}, "b": {"bed": 1}}
+    out = _table().outcome_tables()["is_bed"]
+    assert mem.recalled("a", out) == 0 and mem.recalled("b", out) == 1 and mem.recalled("c", out) is None
+    mem.merge("a", "b")
+    assert mem.counts == {"a": {"chair": 2, "bed": 1}}
+    assert mem.recalled("a", out) is None
+
+
+def _run(engine: str, labels_then: list[str | None], config: dict | None = None):
+    """Three claims 'bed' on v with the channel's labels ``labels_then``, then five it does not see."""
+    op = make_operator("comod", config, _table(), engine=engine)
+    g = SceneGraph(create_nodes=True)
+    items = []
+    for t, lab in enumerate(labels_then):
+        items.append((EvidenceEvent({"v": 1.0}, "is_bed", 0.8, "det", t, f"seen{t}"), FrameLabels({"v": lab})))
+    t0 = len(labels_then)
+    for i in range(5):
+        items.append((EvidenceEvent({"v": 1.0}, "is_bed", 0.8, "det", t0 + i, f"unseen{i}"), FrameLabels({"v": None})))
+    op.update_many(g, items)
+    return op, g
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_a_claim_the_elements_earlier_labels_contradict_is_refused(engine: str) -> None:
+    op, g = _run(engine, ["chair", "chair", "chair"])
+    entries = [e for e in g.provenance.entries("v", "is_bed") if e.event_id and e.event_id.startswith("unseen")]
+    assert entries and all(e.status is EntryStatus.REFUSED for e in entries)
+    assert g.probability("v", "is_bed") < 0.5
+    # Eq. 4 holds and a refused claim retracts like any other
+    assert g.provenance.alpha_beta("v", "is_bed") == pytest.approx(g.provenance.reconstruct("v", "is_bed"))
+    before = g.provenance.alpha_beta("v", "is_bed")
+    op.retract(g, "unseen2")
+    assert not g.provenance.has_event("unseen2")
+    assert g.provenance.alpha_beta("v", "is_bed") == pytest.approx(before)
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_without_recall_or_when_the_channel_changed_its_mind_the_claims_count(engine: str) -> None:
+    _, g_off = _run(engine, ["chair", "chair", "chair"], {"recalled_verdicts": "none"})
+    _, g_on = _run(engine, ["chair", "chair", "chair"])
+    unseen = [e for e in g_off.provenance.entries("v", "is_bed") if e.event_id and e.event_id.startswith("unseen")]
+    assert unseen and all(e.status is EntryStatus.COMMITTED for e in unseen)  # each one moves the belief
+    assert g_off.probability("v", "is_bed") > g_on.probability("v", "is_bed")
+    _, g_mixed = _run(engine, ["chair", "bed", "otherprop"])
+    unseen = [e for e in g_mixed.provenance.entries("v", "is_bed") if e.event_id and e.event_id.startswith("unseen")]
+    assert unseen and not any(e.status is EntryStatus.REFUSED for e in unseen)
+    _, g_bed = _run(engine, ["bed", "bed"])  # a recalled ⊤ only lets the claims through
+    assert g_bed.probability("v", "is_bed") > 0.5
+
+
+def test_the_paper_variant_and_cal_do_not_recall() -> None:
+    assert make_operator("comod_paper", None, _table()).config.recalled_verdicts == "none"
+    assert not make_operator("cal", None, _table()).recalls_verdicts
+    assert make_operator("comod", None, _table()).recalls_verdicts
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_merged_elements_share_their_labels(engine: str) -> None:
+    op = make_operator("comod", None, _table(), engine=engine)
+    g = SceneGraph(create_nodes=True)
+    op.update_many(g, [(EvidenceEvent({"a": 1.0}, "is_bed", 0.8, "det", 0, "e0"), FrameLabels({"a": "chair"}))])
+    g.ensure_node("b")
+    op.merge_nodes(g, "b", "a")
+    op.update_many(g, [(EvidenceEvent({"b": 1.0}, "is_bed", 0.8, "det", 1, "e1"), FrameLabels({"b": None}))])
+    (e1,) = [e for e in g.provenance.entries("b", "is_bed") if e.event_id == "e1"]
+    assert e1.status is EntryStatus.REFUSED
