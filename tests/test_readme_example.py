@@ -38,7 +38,7 @@ def test_the_readme_example_draws_refusals_and_explains_the_car_event_by_event(
     graph = SceneGraph.load(show[1])
     state = map_state(graph, nodes=nodes_by_scene(graph)[show[show.index("--scene") + 1]])
     assert state.folded == 0  # nothing of this scene is folded away
-    assert len(state.refused) == 471  # the number the README gives
+    assert len(state.refused) == 518  # the number the README gives
     node, predicate = explain[2], explain[3]
     assert state.sites()[0].node == node  # the object the map marks A
     capsys.readouterr()
