@@ -36,8 +36,12 @@ def read_claims(obj: Mapping[str, Any], class_names: dict[int, str]) -> list[Cla
         # a fresh detection (one entry in lists): every detection routed in a frame
         claim = _read_one(ids[0], confs[0], obj.get("class_name"), obj.get("image_idx"), class_names)
         return [] if claim is None else [claim]
-    ids, confs, frames = _seq(ids), _seq(confs), _seq(obj.get("image_idx"))
-    names = obj.get("class_name")
+    return _read_all(ids, confs, obj.get("image_idx"), obj.get("class_name"), class_names)
+
+
+def _read_all(ids: Any, confs: Any, frames: Any, names: Any, class_names: dict[int, str]) -> list[Claim]:
+    """:func:`read_claims` of any dict: the per-detection fields as lists, entry by entry."""
+    ids, confs, frames = _seq(ids), _seq(confs), _seq(frames)
     n = max(len(ids), len(confs))
     out: list[Claim] = []
     for k in range(n):
