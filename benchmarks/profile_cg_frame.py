@@ -16,7 +16,9 @@ Prints CPU time per frame and per detection (``time.process_time``, medians over
 ``--breakdown`` the CPU time of the timed frames by part of the backend (exclusive times of the
 wrapped functions, so nothing is counted twice; CPU time, so other jobs on the machine do not
 inflate it); with ``--profile`` a pyinstrument tree (wall-clock samples; ``--profile-out`` writes it
-to a file).
+to a file); with ``--pieces`` the warm CPU time of single pieces of a frame, each repeated on
+objects the backend has already seen (the same public calls on every version of the package, so two
+checkouts compare side by side).
 """
 
 from __future__ import annotations
@@ -232,6 +234,103 @@ def run(n_obj: int, n_dets: int, frames: int, channel: str, profiler: Any = None
             "ratio": (1e6 * med / n_dets) / (1e6 * replay) if replay else float("nan")}
 
 
+def pieces(repeat: int = 2000, rounds: int = 7) -> dict[str, float]:
+    """Warm µs per call of single pieces of a frame (the fastest of ``rounds`` rounds of ``repeat``
+    calls, as timeit advises: slower rounds are other jobs on the machine, not the piece).
+
+    - ``read_claims``: the claims of a one-detection dict;
+    - ``route_detection``: one such detection routed to one node (queued, not applied);
+    - ``refresh_geometry``: a registered object's centroid / box copied into its node;
+    - ``trusted event``: ``EvidenceEvent.trusted`` from checked parts;
+    - ``new object``: a fresh detection registered (identity, graph node, geometry, its claim);
+    - ``sync one object``: the per-frame label sync of one touched, merged object (``main``).
+    """
+    import copy
+
+    from sgbelief.adapters.conceptgraphs import ConceptGraphsBackend
+    from sgbelief.adapters.conceptgraphs.claims import read_claims
+    from sgbelief.adapters.conceptgraphs.functions import make_functions
+    from sgbelief.fusion.events import EvidenceEvent, next_event_id
+
+    rng = np.random.default_rng(0)
+    mask = np.ones((H, W), dtype=bool)
+    backend = ConceptGraphsBackend("comod", context="pieces", class_names=CLASSES, print_summary=False)
+    f = make_functions(backend, "main", originals={"merge_obj2_into_obj1": stand_in_merge})
+    objs = [make_object(rng, k, k % len(CLASSES), 1, mask, 0.8, CLASSES[k % len(CLASSES)]) for k in range(50)]
+    for o in objs:
+        backend.ensure_node(o)
+    backend.flush()
+    det = make_object(rng, 999, 2, 2, mask, 0.7, CLASSES[2])
+    node = backend.node_of(objs[0])
+
+    def fresh_detections(r: int) -> list[dict]:
+        """``repeat`` detections with distinct first detections (each is a new object)."""
+        out = [copy.copy(det) for _ in range(repeat)]
+        for k, d in enumerate(out):
+            d.update(image_idx=[3 + r], mask_idx=[10_000 + k], color_path=[f"frame{r}-{k}.jpg"], conf=[0.7],
+                     class_id=[2], class_name=[CLASSES[2]])
+        return out
+
+    clock = time.process_time
+    out: dict[str, list[float]] = {}
+
+    def timed(name: str, fn: Any, setup: Any = None) -> None:
+        for _ in range(rounds):
+            if setup is not None:
+                setup()
+            t0 = clock()
+            fn()
+            out.setdefault(name, []).append(1e6 * (clock() - t0) / repeat)
+
+    def claims() -> None:
+        names = backend.class_names
+        for _ in range(repeat):
+            read_claims(det, names)
+
+    def route() -> None:
+        targets = {node: 1.0}
+        with backend.batch():
+            for _ in range(repeat):
+                backend.route_detection(det, targets)
+            backend._pending.clear()  # the queued events are not applied (not part of the piece)
+            backend._pending_dicts.clear()
+
+    def refresh() -> None:
+        obj = objs[0]
+        for _ in range(repeat):
+            backend.refresh_geometry(obj)
+
+    def trusted() -> None:
+        targets = {node: 1.0}
+        for _ in range(repeat):
+            EvidenceEvent.trusted(targets, "is_chair", 0.7, "pieces", 3, next_event_id())
+
+    def new_objects() -> None:
+        with backend.batch():
+            for d in fresh:
+                backend.ensure_node(d)
+            backend._pending.clear()
+            backend._pending_dicts.clear()
+
+    def sync_one() -> None:
+        touched = [0]
+        for _ in range(repeat):
+            f.merged.add(id(objs[0]))
+            f.sync_labels(objs, touched)
+
+    timed("read_claims", claims)
+    timed("route_detection", route)
+    timed("refresh_geometry", refresh)
+    timed("trusted event", trusted)
+    for r in range(rounds):  # each round registers new detections
+        fresh = fresh_detections(r)
+        t0 = clock()
+        new_objects()
+        out.setdefault("new object", []).append(1e6 * (clock() - t0) / repeat)
+    timed("sync one object", sync_one)
+    return {k: min(v) for k, v in out.items()}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--detections", default="10,30")
@@ -241,7 +340,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", action="store_true", help="pyinstrument tree of the timed frames")
     ap.add_argument("--breakdown", action="store_true", help="CPU time of the timed frames by part of the backend")
     ap.add_argument("--profile-out", default=None)
+    ap.add_argument("--pieces", action="store_true", help="warm CPU time of single pieces of a frame, then exit")
     args = ap.parse_args(argv)
+    if args.pieces:
+        import gc
+
+        gc.collect()
+        gc.disable()  # a collection landing in a few-ms piece would be timed as the piece
+        try:
+            timings = pieces()
+        finally:
+            gc.enable()
+        for name, us in timings.items():
+            print(f"{name:<20} {us:7.2f} us")
+        return 0
     for n_obj in (int(x) for x in args.objects.split(",")):
         for n_dets in (int(x) for x in args.detections.split(",")):
             prof = None

@@ -92,14 +92,14 @@ class SceneGraphModel:
         """
         if isinstance(node, bool) or not isinstance(node, (str, int)):
             raise TypeError(f"node ids must be str or int (JSON-serialisable), got {type(node).__name__}")
-        data: dict[str, Any] = dict(attrs)
+        data: dict[str, Any] = attrs  # the keyword arguments' own dict: no copy needed
         if centroid is not None:
             data["centroid"] = _as_point(centroid, "centroid")
         if bbox is not None:
             if len(bbox) != 2:
                 raise ValueError("bbox must be ((xmin, ymin, zmin), (xmax, ymax, zmax))")
             lo, hi = _as_point(bbox[0], "bbox min"), _as_point(bbox[1], "bbox max")
-            if any(a > b for a, b in zip(lo, hi)):
+            if lo[0] > hi[0] or lo[1] > hi[1] or lo[2] > hi[2]:  # both have 3 coordinates (_as_point)
                 raise ValueError(f"bbox min {lo} exceeds max {hi}")
             data["bbox"] = (lo, hi)
         if label is not None:

@@ -31,8 +31,17 @@ class Claim(NamedTuple):
 def read_claims(obj: Mapping[str, Any], class_names: dict[int, str]) -> list[Claim]:
     """The per-detection (class, confidence, frame) history stored in a CG object dict. Names seen
     with a class id are added to ``class_names`` (id -> name)."""
-    ids, confs, frames = _seq(obj.get("class_id")), _seq(obj.get("conf")), _seq(obj.get("image_idx"))
-    names = obj.get("class_name")
+    ids, confs = obj.get("class_id"), obj.get("conf")
+    if type(ids) is list and type(confs) is list and len(ids) == 1 and len(confs) == 1:
+        # a fresh detection (one entry in lists): every detection routed in a frame
+        claim = _read_one(ids[0], confs[0], obj.get("class_name"), obj.get("image_idx"), class_names)
+        return [] if claim is None else [claim]
+    return _read_all(ids, confs, obj.get("image_idx"), obj.get("class_name"), class_names)
+
+
+def _read_all(ids: Any, confs: Any, frames: Any, names: Any, class_names: dict[int, str]) -> list[Claim]:
+    """:func:`read_claims` of any dict: the per-detection fields as lists, entry by entry."""
+    ids, confs, frames = _seq(ids), _seq(confs), _seq(frames)
     n = max(len(ids), len(confs))
     out: list[Claim] = []
     for k in range(n):
@@ -53,6 +62,28 @@ def read_claims(obj: Mapping[str, Any], class_names: dict[int, str]) -> list[Cla
         t = _as_int(frames[k]) if k < len(frames) else 0
         out.append(Claim(cid, name, min(max(conf, 0.0), 1.0), t if t is not None else 0))
     return out
+
+
+def _read_one(cid_raw: Any, conf_raw: Any, names: Any, frames: Any, class_names: dict[int, str]) -> Claim | None:
+    """:func:`read_claims` of a dict whose ``class_id`` and ``conf`` are one-entry lists (the same
+    rules for k = 0, without building the per-field lists)."""
+    frames = frames if type(frames) is list else _seq(frames)  # first, as read_claims does
+    cid = _as_int(cid_raw)
+    if isinstance(names, list) and names:
+        name = str(names[0])
+    elif cid is not None and cid in class_names:
+        name = class_names[cid]
+    elif isinstance(names, str):  # n == 1
+        name = names
+    elif cid is not None:
+        name = str(cid)
+    else:
+        return None
+    if cid is not None and cid >= 0 and name != str(cid):
+        class_names.setdefault(cid, name)
+    conf = _as_float(conf_raw) if conf_raw is not None else 1.0
+    t = _as_int(frames[0]) if frames else 0
+    return Claim(cid, name, min(max(conf, 0.0), 1.0), t if t is not None else 0)
 
 
 class EventChannel:

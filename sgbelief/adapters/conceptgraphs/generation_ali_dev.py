@@ -113,7 +113,9 @@ class AliDevGeneration(GenerationFunctions):
                           dbscan_remove_noise: bool, dbscan_eps: float, dbscan_min_points: int,
                           spatial_sim_type: str, device: Any) -> Any:
         """Merge matched detections (beliefs spread with the scores of the last match call)."""
-        with self.backend.batch():  # the frame's events: one update_many call
+        backend = self.backend
+        # the frame's events in one update_many call; each object resolved to its node once
+        with backend.batch(), backend.frame_lookups():
             return self._merge_obj_matches(detection_list, objects, match_indices, downsample_voxel_size,
                                            dbscan_remove_noise, dbscan_eps, dbscan_min_points, spatial_sim_type,
                                            device)
@@ -140,14 +142,14 @@ class AliDevGeneration(GenerationFunctions):
                     counter_update(lambda: tracker.object_dict.update(
                         {"id": det["id"], "first_discovered": tracker.curr_frame_idx}))
                 objects.append(det)
-                backend.ensure_node(det)
+                backend.frame_node(det)
                 touched.add(len(objects) - 1)
                 continue
             if sims is not None:
                 targets = backend.targets_for(sims[i][:n_before], j, objects, thr, touched,
                                               candidates=None if cands is None else cands[i])
             else:
-                targets = {backend.ensure_node(objects[j]): 1.0}
+                targets = {backend.frame_node(objects[j]): 1.0}
                 touched.add(j)
             backend.route_detection(det, targets)
             if backend.pending_dict(objects[j]):  # a queued claim still reads this dict: apply first

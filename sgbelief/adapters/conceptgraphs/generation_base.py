@@ -83,13 +83,14 @@ def as_numpy(scores: Any, *, keep_dtype: bool = False) -> np.ndarray:
     return np.asarray(scores, dtype=float)
 
 
-def candidate_matrix(scores: np.ndarray, threshold: float) -> list[list[int]]:
-    """Per row, the positions whose score is finite, above ``threshold`` and positive (the targeting
-    candidates of :meth:`MapBeliefs.targets_for`), for a whole frame in a few array operations."""
+def candidate_matrix(scores: np.ndarray, threshold: float) -> list[dict[int, float]]:
+    """Per row, position -> score of the positions whose score is finite, above ``threshold`` and
+    positive (the targeting candidates of :meth:`MapBeliefs.targets_for`, in position order), for a
+    whole frame in a few array operations: the scores come with the positions, no second pass."""
     rows, cols = np.nonzero(np.isfinite(scores) & (scores > threshold) & (scores > 0))
-    out: list[list[int]] = [[] for _ in range(scores.shape[0])]
-    for r, c in zip(rows.tolist(), cols.tolist()):
-        out[r].append(c)
+    out: list[dict[int, float]] = [{} for _ in range(scores.shape[0])]
+    for r, c, v in zip(rows.tolist(), cols.tolist(), scores[rows, cols].tolist()):
+        out[r][c] = v
     return out
 
 
@@ -174,11 +175,12 @@ class GenerationFunctions:
         # an object whose node was added this frame has its geometry already, unless a detection
         # was merged into it since: its summary is computed once, not twice
         fresh, merged = backend.fresh_geometry, self.merged
+        node_of, refresh = backend.frame_node, backend.refresh_node_geometry
         for k in positions:
             obj = objects[k]
-            node = backend.ensure_node(obj)
+            node = node_of(obj)  # resolved once in the frame (a target, a new object)
             if id(obj) not in fresh or id(obj) in merged:
-                backend.refresh_geometry(obj)
+                refresh(node, obj)
             seen.append((k, node))
         fresh.clear()
         merged.clear()
@@ -210,7 +212,9 @@ class GenerationFunctions:
     def assign(self, detection_list: Any, objects: Any, agg_sim: Any, threshold: float, merge_one: MergeOne) -> Any:
         """Association loop: a new object when the row has no candidate, else spread the beliefs
         over the candidates and merge the geometry into the argmax."""
-        with self.backend.batch():  # the frame's events: one update_many call
+        backend = self.backend
+        # the frame's events in one update_many call; each object resolved to its node once
+        with backend.batch(), backend.frame_lookups():
             return self._assign(detection_list, objects, agg_sim, threshold, merge_one)
 
     def _assign(self, detection_list: Any, objects: Any, agg_sim: Any, threshold: float, merge_one: MergeOne) -> Any:
@@ -229,7 +233,7 @@ class GenerationFunctions:
             top = max_of[i]
             if top <= threshold or top == NEG_INF:
                 objects.append(det)
-                backend.ensure_node(det)
+                backend.frame_node(det)
                 touched.add(len(objects) - 1)
                 continue
             j = best_of[i]

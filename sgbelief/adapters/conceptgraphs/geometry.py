@@ -38,7 +38,7 @@ def geometry_summary(obj: Any) -> tuple[Any, Any]:
     as tuples of floats, or (None, None) when it has none."""
     pts = None
     pcd = obj.get("pcd")
-    if pcd is not None and hasattr(pcd, "get_min_bound") and hasattr(pcd, "has_points"):
+    if pcd is not None and (type(pcd) in _CLOUD_TYPES or _answers_bounds(pcd)):
         # an open3d cloud answers from its own buffers, without a copy into numpy (docs/performance.md)
         if not pcd.has_points():
             return None, None
@@ -53,6 +53,20 @@ def geometry_summary(obj: Any) -> tuple[Any, Any]:
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     centroid = tuple(float(x) for x in pts.mean(axis=0))
     return centroid, (tuple(float(x) for x in lo), tuple(float(x) for x in hi))
+
+
+#: point-cloud classes whose instances answer ``get_min_bound`` / ``has_points`` (open3d's), found once
+_CLOUD_TYPES: set[type] = set()
+
+
+def _answers_bounds(pcd: Any) -> bool:
+    """Whether ``pcd`` answers its bounds itself (an open3d cloud); the class is remembered when it
+    defines both methods, so the check runs once per class, not once per summary."""
+    cls = type(pcd)
+    if hasattr(cls, "get_min_bound") and hasattr(cls, "has_points"):
+        _CLOUD_TYPES.add(cls)
+        return True
+    return hasattr(pcd, "get_min_bound") and hasattr(pcd, "has_points")
 
 
 def _floats(values: Any) -> tuple[float, ...]:

@@ -19,6 +19,9 @@ from typing import Any
 
 Fingerprint = tuple[Any, ...]
 
+#: :meth:`IdentityMap.find` found the node without computing the object's fingerprint
+NOT_COMPUTED: Any = object()
+
 
 def fingerprint(obj: dict) -> Fingerprint | None:
     """Identity of the first detection of ``obj`` (None when the keys are missing or empty)."""
@@ -68,20 +71,26 @@ class IdentityMap:
 
     def lookup(self, obj: dict) -> str | None:
         """Node registered for ``obj`` (resolving tombstones is left to :meth:`resolve`)."""
+        return self.find(obj)[0]
+
+    def find(self, obj: dict) -> tuple[str | None, Any]:
+        """(:meth:`lookup`'s node, the fingerprint it computed, or :data:`NOT_COMPUTED`): a miss is
+        followed by :meth:`register`, which takes the fingerprint instead of computing it again."""
         uid = obj.get("id") if isinstance(obj, dict) else None
         if uid is not None and not isinstance(uid, (bool, int, float)):
             node = self._uid_node(uid)
-            return node if node in self._known else None
+            return (node if node in self._known else None), NOT_COMPUTED
         entry = self._by_id.get(id(obj))
         if entry is not None and entry[0] is obj:
-            return entry[1]
+            return entry[1], NOT_COMPUTED
         fp = fingerprint(obj)
         if fp is not None:
-            return self._by_fp.get(fp)
-        return None
+            return self._by_fp.get(fp), fp
+        return None, fp
 
-    def register(self, obj: dict) -> str:
-        """Give ``obj`` a new node id and remember it."""
+    def register(self, obj: dict, fp: Any = NOT_COMPUTED) -> str:
+        """Give ``obj`` a new node id and remember it. ``fp``: ``obj``'s fingerprint when the caller
+        has it (from :meth:`find`); by default it is computed."""
         uid = obj.get("id")
         if uid is not None and not isinstance(uid, (bool, int, float)):
             node = self._uid_node(uid)
@@ -89,14 +98,14 @@ class IdentityMap:
             node = f"{self._prefix}-{next(self._counter)}"
             while node in self._known:
                 node = f"{self._prefix}-{next(self._counter)}"
-        self._bind(obj, node)
+        self._bind(obj, node, fp)
         return node
 
     def rebind(self, obj: dict, node: str) -> None:
         """Remember that ``obj`` (e.g. a replacement dict) stands for ``node``."""
         self._bind(obj, node)
 
-    def _bind(self, obj: dict, node: str) -> None:
+    def _bind(self, obj: dict, node: str, fp: Any = NOT_COMPUTED) -> None:
         self._known.add(node)
         key = id(obj)
         old = self._by_id.get(key)
@@ -110,7 +119,8 @@ class IdentityMap:
             self._keys_of[node] = {key}
         else:
             keys.add(key)
-        fp = fingerprint(obj)
+        if fp is NOT_COMPUTED:
+            fp = fingerprint(obj)
         if fp is not None:
             self._by_fp.setdefault(fp, node)
 

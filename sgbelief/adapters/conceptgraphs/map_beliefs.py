@@ -162,6 +162,8 @@ class MapBeliefs(LabelReader):
         self._pending: list[tuple[Any, Any, str]] = []
         self._pending_dicts: set[int] = set()
         self._batch_open = False
+        #: id(obj) -> (obj, node) resolved in the current frame (frame_lookups), else None
+        self._frame_nodes: dict[int, tuple[Any, Any]] | None = None
         #: ids of the dicts whose geometry was read when their node was added, since the last
         #: per-frame sync (their geometry is current unless merged into since: see sync_labels)
         self.fresh_geometry: set[int] = set()
@@ -218,15 +220,43 @@ class MapBeliefs(LabelReader):
 
     def ensure_node(self, obj: dict) -> Any:
         """Node of map object ``obj``, registering it (and replaying its history) on first sight."""
-        node = self.identity.lookup(obj)
+        identity = self.identity
+        node, fp = identity.find(obj)
         if node is not None:
-            if self.identity.is_absorbed(node):
-                return self.identity.resolve(node)
+            if identity.is_absorbed(node):
+                return identity.resolve(node)
             if node in self.graph:
                 return node
-        node = self.identity.register(obj)
+        node = identity.register(obj, fp)  # the fingerprint find computed, not a second one
         self._add_graph_node(node, obj)
         self.route_detection(obj, {node: 1.0})
+        return node
+
+    @contextlib.contextmanager
+    def frame_lookups(self) -> Iterator[None]:
+        """Inside: :meth:`frame_node` resolves each object to its node once (a per-frame merge asks
+        for the same objects as targets, then again in its label sync). Whatever moves an object to
+        another node (:meth:`migrate`, :meth:`mark_filtered`) forgets what was resolved."""
+        if self._frame_nodes is not None:
+            yield
+            return
+        self._frame_nodes = {}
+        try:
+            yield
+        finally:
+            self._frame_nodes = None
+
+    def frame_node(self, obj: dict) -> Any:
+        """:meth:`ensure_node`, memoised per object inside :meth:`frame_lookups` (the same node:
+        nothing in a frame's routing moves an object to another node)."""
+        memo = self._frame_nodes
+        if memo is None:
+            return self.ensure_node(obj)
+        hit = memo.get(id(obj))
+        if hit is not None and hit[0] is obj:  # the object is held, so its id() is not reused
+            return hit[1]
+        node = self.ensure_node(obj)
+        memo[id(obj)] = (obj, node)
         return node
 
     def _add_graph_node(self, node: Any, obj: Mapping[str, Any]) -> None:
@@ -401,40 +431,48 @@ class MapBeliefs(LabelReader):
         return changed
 
     def targets_for(self, row: Any, best: int, objects: Sequence[dict], threshold: float,
-                    touched: set[int] | None = None, candidates: Sequence[int] | None = None) -> dict[Any, float]:
+                    touched: set[int] | None = None,
+                    candidates: Sequence[int] | Mapping[int, float] | None = None) -> dict[Any, float]:
         """Targeting distribution T for one detection from its row of association scores.
 
         Every object whose score is above ``threshold`` (finite scores when it is -inf) is a
         candidate; T(v) is proportional to max(score, 0) over the candidates, and the argmax
         alone gets mass 1 when no candidate has a positive score.  The caller drops T(v) <= tau_T.
         ``touched``: the list positions of the targeted objects are added to it. ``candidates``:
-        the positions of the positive candidates when the caller found them for the whole frame.
+        the positive candidates when the caller found them for the whole frame, as positions or as
+        position -> score (:func:`~.generation_base.candidate_matrix`; then ``row`` is not read).
         """
-        scores = row if type(row) is np.ndarray and row.dtype == np.float64 else \
-            np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float)
-        scores = scores.ravel()
-        if candidates is None:
-            n = min(len(scores), len(objects))
-            s = scores[:n]
-            # candidates found in numpy: the per-detection cost does not grow with the map's size
-            candidates = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0)).tolist()
-        pos = {j: float(scores[j]) for j in candidates}
+        if isinstance(candidates, dict):
+            pos: Mapping[int, float] = candidates
+        else:
+            scores = row if type(row) is np.ndarray and row.dtype == np.float64 else \
+                np.asarray(row.detach().cpu().numpy() if hasattr(row, "detach") else row, dtype=float)
+            scores = scores.ravel()
+            if candidates is None:
+                n = min(len(scores), len(objects))
+                s = scores[:n]
+                # candidates found in numpy: the per-detection cost does not grow with the map's size
+                candidates = np.flatnonzero(np.isfinite(s) & (s > threshold) & (s > 0)).tolist()
+            pos = {j: float(scores[j]) for j in candidates}
+        node_of = self.frame_node
         if len(pos) <= 1 or best not in pos:
             if touched is not None:
                 touched.add(best)
-            return {self.ensure_node(objects[best]): 1.0}
+            return {node_of(objects[best]): 1.0}
         if touched is not None:
             touched.update(pos)
         total = sum(pos.values())
         out: dict[Any, float] = {}
         for j, s in pos.items():
-            node = self.ensure_node(objects[j])
+            node = node_of(objects[j])
             out[node] = out.get(node, 0.0) + s / total
         return out
 
     def migrate(self, keep_obj: dict, absorb_obj: dict) -> None:
         """``absorb_obj`` (a map object or a fresh detection) is being merged into ``keep_obj``."""
         self.flush()
+        if self._frame_nodes:
+            self._frame_nodes.clear()  # objects may now stand for another node
         keep = self.ensure_node(keep_obj)
         raw = self.identity.lookup(absorb_obj)
         if raw is None:
@@ -463,11 +501,16 @@ class MapBeliefs(LabelReader):
 
     def refresh_geometry(self, obj: Mapping[str, Any]) -> None:
         """Copy the object's current centroid / box into its node."""
-        node = self.node_of(obj)
-        if node is None or node not in self.graph:
+        self.refresh_node_geometry(self.node_of(obj), obj)
+
+    def refresh_node_geometry(self, node: Any, obj: Mapping[str, Any]) -> None:
+        """:meth:`refresh_geometry` when the caller has resolved ``obj``'s node already (the label
+        sync, right after :meth:`ensure_node`): one geometry summary, no second identity look-up."""
+        graph = self.graph
+        if node is None or node not in graph:
             return
         centroid, bbox = geometry_summary(obj)
-        attrs = self.graph.nx.nodes[node]
+        attrs = graph.nx.nodes[node]
         if centroid is not None:
             attrs["centroid"] = centroid
         if bbox is not None:
@@ -475,6 +518,8 @@ class MapBeliefs(LabelReader):
 
     def mark_filtered(self, obj: Mapping[str, Any]) -> None:
         self.flush()
+        if self._frame_nodes:
+            self._frame_nodes.clear()
         node = self.node_of(obj)
         if node is None or node not in self.graph:
             return
