@@ -71,9 +71,11 @@ def main(argv: list[str] | None = None) -> int:
     vote = H.run(world, cg, args.cg, seed=args.seed, prepopulate=pre)
     if args.objects:
         _medians(gen, "conceptgraphs-vote", vote)
-    print(f"[{gen}] ConceptGraphs vote            acc {vote.accuracy:.3f}  mIoU {vote.miou:.3f}  "
+    print(f"[{gen}] ConceptGraphs vote            acc {vote.accuracy:.3f} (ties at random {vote.vote_ties_at_random:.3f})  "
+          f"mIoU {vote.miou:.3f}  "
           f"objects {vote.n_objects}  fusion {np.mean(vote.fusion_ms):.1f} ms/frame  ({time.perf_counter() - t0:.0f} s)")
     out["runs"].append({"channel": None, "operator": "conceptgraphs-vote", "accuracy": vote.accuracy,
+                        "accuracy_ties_at_random": vote.vote_ties_at_random,
                         "miou": vote.miou, "objects": vote.n_objects, "fusion_ms": float(np.mean(vote.fusion_ms))})
     if args.objects:
         out["runs"][-1].update(_per_frame(vote))

@@ -410,6 +410,10 @@ class RunResult:
     # per timed frame: of fusion_ms, the merge (main: merge_detections_to_objects; ali-dev: match +
     # merge_obj_matches + the relabel loop), where the backend, when installed, does its work
     merge_ms: list[float] = field(default_factory=list)
+    #: ConceptGraphs' vote with its ties broken at random, as an expected accuracy: an object whose
+    #: detections name k classes equally often counts 1/k when its class is one of them (the vote
+    #: itself breaks ties by the lowest class id on main, by the first seen on ali-dev)
+    vote_ties_at_random: float = float("nan")
 
 
 def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 3, frames: int | None = None,
@@ -537,7 +541,18 @@ def run(world: World, cg: tuple, path: str, *, backend: Any = None, seed: int = 
         truth.append(votes.most_common(1)[0][0])
     acc = float(np.mean([lab == (world.objects[t][0] if t >= 0 else None) for lab, t in zip(labels, truth)]))
     return RunResult(labels, truth, acc, _miou(objects, labels, truth, world), len(objects), fusion_ms, summary,
-                     n_dets, n_map, box3d_ms, merge_ms)
+                     n_dets, n_map, box3d_ms, merge_ms, _vote_ties_at_random(objects, truth, world))
+
+
+def _vote_ties_at_random(objects: Any, truth: list[int], world: World) -> float:
+    """The vote's expected accuracy with its ties broken at random (see RunResult)."""
+    score = 0.0
+    for obj, t in zip(objects, truth):
+        counts = Counter(world.classes[int(c)] for c in obj["class_id"])
+        top = max(counts.values())
+        tied = [c for c, n in counts.items() if n == top]
+        score += (t >= 0 and world.objects[t][0] in tied) / len(tied)
+    return score / max(len(truth), 1)
 
 
 def _far_copy(det: Any, k: int) -> dict:

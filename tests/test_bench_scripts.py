@@ -73,3 +73,38 @@ def test_throughput_benchmark_reports_both_normalisations() -> None:
     bad = subprocess.run([sys.executable, script, "--operators", "majority,nope"], capture_output=True, text=True,
                          timeout=300)
     assert bad.returncode == 2 and "nope" in bad.stderr and "comod" in bad.stderr
+
+
+def test_vote_diff_summary_counts_ties_and_reasons(tmp_path: Path, capsys) -> None:
+    """cg_vote_diff.py: ConceptGraphs' vote with each branch's tie rule, the vote with ties at
+    random, and the reason per differing object, on a hand-written run record."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        import cg_vote_diff as D
+    finally:
+        sys.path.remove(str(BENCH))
+    classes = ["chair", "sofa", "stool"]
+    assert D.vote(["stool", "chair"], "main", classes) == "chair"  # np.unique: the lowest class id
+    assert D.vote(["stool", "chair"], "ali-dev", classes) == "stool"  # Counter: the first seen
+    assert D.vote(["stool", "chair"], "main", classes, reverse=True) == "stool"
+    objects = [{"class_ids": ["stool", "chair"], "routed": {"stool": 1, "chair": 1}, "node": "a"},  # tie
+               {"class_ids": ["sofa", "sofa", "chair"], "routed": {"sofa": 2, "chair": 2}, "node": "b"},  # split
+               {"class_ids": ["sofa", "sofa", "chair"], "routed": {"sofa": 2, "chair": 1}, "node": "c"},  # ranking
+               {"class_ids": ["sofa"], "routed": {"sofa": 1}, "node": "d"}]  # unknown
+    rec = {"seed": 0, "branch": "main", "confidences": "uniform", "channel": "none", "classes": classes,
+           "truth": ["stool", "chair", "sofa", "sofa"], "labels": ["stool", "chair", "chair", "unknown"],
+           "acc": 0.5, "objects": objects}
+    assert [D.why_differs(o, lab) for o, lab in zip(objects, rec["labels"])] == ["tie", "split", "ranking", "unknown"]
+    path = tmp_path / "runs.jsonl"
+    path.write_text(json.dumps(rec) + "\n")
+    D.summarise([str(path)])
+    out = capsys.readouterr().out
+    assert "vote                       0.500" in out  # chair (wrong), sofa (wrong), sofa, sofa
+    assert "vote, ties at random       0.625" in out  # the tie counts 1/2
+    assert "comod                      0.500" in out
+    rows = {}
+    for line in out.splitlines():
+        if line.strip().startswith("differ,"):
+            words = line.replace(",", " ").split()  # differ REASON N objects: vote right V comod right C
+            rows[words[1]] = (int(words[2]), int(words[6]), int(words[9]))
+    assert rows == {"tie": (1, 0, 1), "split": (1, 0, 1), "ranking": (1, 1, 0), "unknown": (1, 1, 0)}

@@ -442,3 +442,40 @@ def test_the_backend_observes_labels_unless_its_config_says_otherwise():
 
     with pytest.raises(ConfigError, match="geometric_evidence"):
         ConceptGraphsBackend("comod", geometric_evidence="sometimes")
+
+
+def test_the_summary_says_why_a_label_differs_from_the_vote():
+    """ConceptGraphs' loop with no channel and confidences that carry no information (issue #30):
+    comod's label differs from the vote where the vote's count is tied (its pick is its tie rule;
+    comod's the confidence-weighted ranking), where the claims routed to an object are not its
+    own detections (a detection split between two candidates, merged into the other), where the
+    confidences outrank a count, and where nothing commits. The summary names each case."""
+    names = ["chair", "stool", "sofa"]
+    backend = ConceptGraphsBackend("comod", class_names=names, print_summary=False)
+    objects = {}
+
+    def obj(key, claims):  # a map object whose own detections are `claims`: each routed to it whole
+        first, *rest = claims
+        o = make_detection(blob((0, 0, 0)), names.index(first[0]), first[0], first[1], 0, mask_idx=len(objects))
+        node = backend.ensure_node(o)
+        for t, (name, c) in enumerate(rest, start=1):
+            backend.route_detection(make_detection(blob((0, 0, 0)), names.index(name), name, c, t), {node: 1.0})
+            o["class_id"].append(names.index(name))
+        objects[key] = o
+        return node
+
+    obj("tie", [("chair", 0.6), ("stool", 0.9), ("chair", 0.62), ("stool", 0.95)])
+    split = obj("split", [("chair", 0.7), ("chair", 0.7), ("sofa", 0.7)])
+    other = obj("other", [("sofa", 0.8)])
+    for t in (5, 6):  # two sofa detections split between `split` and `other`; ConceptGraphs merged them into `other`
+        backend.route_detection(make_detection(blob((0, 0, 0)), 2, "sofa", 0.95, t), {split: 0.5, other: 0.5})
+        objects["other"]["class_id"].append(2)
+    obj("ranking", [("stool", 0.56), ("stool", 0.56), ("stool", 0.56), ("chair", 0.97), ("chair", 0.97)])
+    obj("unknown", [("sofa", 0.3)])
+    s = backend.summary(list(objects.values()))
+    got = {d["vote"] + " -> " + d["label"]: d["why"] for d in s.differing}
+    assert got == {"chair -> stool": "tie", "chair -> sofa": "split", "stool -> chair": "ranking",
+                   "sofa -> unknown": "unknown"}
+    assert "(unknown 1, tie 1, split 1, ranking 1)" in s.format()
+    # without the objects the vote is over the routed claims: the split object's vote is then sofa
+    assert {d["vote"] for d in backend.summary().differing} == {"chair", "stool", "sofa"}

@@ -128,7 +128,7 @@ def test_readme_label_image_block_connects_the_segmenter(capsys: pytest.CaptureF
         assert s.classes["table"].differ == 1 and "table" in s.format()
         backend.uninstall()  # prints the summary (to stderr by default)
         err = capsys.readouterr().err
-        assert "3 claims routed" in err and "labels that differ from the vote: cg-0: table -> chair" in err
+        assert "3 claims routed" in err and "labels that differ from the vote (ranking 1): cg-0: table -> chair" in err
     finally:
         if "backend" in ns:
             ns["backend"].uninstall()

@@ -246,10 +246,26 @@ class LabelReader:
         """What the backend did, over ``objects`` (a map object list) or every live node it tracks:
         objects labelled and left ``unknown``, and per detector class the claims (verified, refused,
         unverifiable by the channel) and the objects whose vote is that class (committed, unknown,
-        written label differing from the vote). See :class:`~.summary.BackendSummary`."""
+        written label differing from the vote). See :class:`~.summary.BackendSummary`.
+
+        The vote is ConceptGraphs' majority over the object's own detections (its ``class_id``
+        list) when ``objects`` are given, else over the claims routed to the node. Each object
+        whose label differs says why (``"why"``): ``unknown`` (nothing commits), ``tie`` (the
+        vote's top count is shared and the label is one of the tied classes: the vote's pick is
+        its tie rule), ``split`` (the claims routed to the object are not its own detections'
+        classes: a detection split between candidates, T(v) < 1, or merged elsewhere) or
+        ``ranking`` (the same counts, another class ranked first by the beliefs)."""
         self.flush()
+        own: dict[Any, Counter[str]] = {}
         if objects is not None:
-            nodes = [n for n in (self.node_of(o) for o in objects) if n is not None and n in self.graph]
+            nodes = []
+            for obj in objects:
+                n = self.node_of(obj)
+                if n is not None and n in self.graph:
+                    nodes.append(n)
+                    names = self._own_class_names(obj)
+                    if names:
+                        own[n] = names
         else:
             nodes = [n for n in self.graph.nodes() if n in self._names_per_node]
         attrs = self.graph.nx.nodes
@@ -263,8 +279,11 @@ class LabelReader:
         for n in live:
             hit = self.committed_class(n)
             labelled += hit is not None
-            names = self._names_per_node.get(n)
-            vote = _vote(names) if names else None
+            routed = Counter[str]()
+            for (_cid, name), k in self._names_per_node.get(n, Counter()).items():
+                routed[name] += k
+            counts = own.get(n, routed)
+            vote = _vote(counts) if counts else None
             if vote is None:
                 continue
             row = per_class.setdefault(vote, {})
@@ -273,7 +292,8 @@ class LabelReader:
             written = self.unknown_label if hit is None else hit[1]
             if written != vote:
                 row["differ"] = row.get("differ", 0) + 1
-                differing.append({"node": str(n), "vote": vote, "label": written})
+                differing.append({"node": str(n), "vote": vote, "label": written,
+                                  "why": _why(hit is None, written, counts, routed)})
         vocab = self.vocabulary
         return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
                               filtered=filtered, detections=self._routed_detections,
@@ -282,6 +302,21 @@ class LabelReader:
                               differing=differing, channel=self.labels.report() if self._has_channel else {},
                               vocabulary=getattr(vocab, "name", "") if vocab is not None else "",
                               operator=self._operator_settings())
+
+    def _own_class_names(self, obj: Mapping[str, Any]) -> Counter[str]:
+        """Class names of the object's own detections (its ``class_id`` list), as ConceptGraphs
+        counts them for its vote; empty when the object has no such list or an id is unknown."""
+        names = Counter[str]()
+        try:
+            ids = list(obj.get("class_id", ()))
+        except TypeError:
+            return names
+        for cid in ids:
+            name = self.class_names.get(int(cid))
+            if name is None:
+                return Counter()
+            names[name] += 1
+        return names
 
     def _operator_settings(self) -> dict[str, str]:
         """The operator's name and its settings for claims the channel does not decide."""
@@ -295,10 +330,23 @@ class LabelReader:
         return out
 
 
-def _vote(names: Counter[tuple[int | None, str]]) -> str:
-    """ConceptGraphs' majority class name of an object's claims (ties to the first seen)."""
+def _vote(names: Counter[str]) -> str:
+    """The majority class name of an object's claims (ties to the first seen, as ali-dev's
+    ``Counter`` vote; main's ``np.unique`` vote gives ties to the lowest class id)."""
     best, best_n = "", 0
-    for (_cid, name), n in names.items():
+    for name, n in names.items():
         if n > best_n:
             best, best_n = name, n
     return best
+
+
+def _why(unknown: bool, written: str, counts: Counter[str], routed: Counter[str]) -> str:
+    """Why a written label differs from the vote over ``counts`` (see LabelReader.summary)."""
+    if unknown:
+        return "unknown"
+    top = max(counts.values())
+    if counts.get(written, 0) == top:
+        return "tie"
+    if counts != routed:
+        return "split"
+    return "ranking"

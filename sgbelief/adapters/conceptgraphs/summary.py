@@ -8,6 +8,7 @@ beside a saved map.
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -52,7 +53,8 @@ class BackendSummary:
     detections: int  #: per-detection claims routed
     events: int  #: evidence entries in the graph
     classes: dict[str, ClassSummary] = field(default_factory=dict)  #: per detector class
-    #: objects whose written label differs from the vote: {"node", "vote", "label"}
+    #: objects whose written label differs from the vote: {"node", "vote", "label", "why"}, ``why``
+    #: one of "unknown", "tie", "split", "ranking" (:meth:`~.labels_out.LabelReader.summary`)
     differing: list[dict[str, Any]] = field(default_factory=list)
     #: labels the channel gave: total, matched, and unmatched label -> count (empty: no channel)
     channel: dict[str, Any] = field(default_factory=dict)
@@ -85,7 +87,9 @@ class BackendSummary:
         if self.differing:
             shown = ", ".join(f"{d['node']}: {d['vote']} -> {d['label']}" for d in self.differing[:12])
             more = f" (+{len(self.differing) - 12} more)" if len(self.differing) > 12 else ""
-            lines.append(f"labels that differ from the vote: {shown}{more}")
+            why = Counter(d.get("why", "?") for d in self.differing)
+            reasons = ", ".join(f"{k} {why[k]}" for k in ("unknown", "tie", "split", "ranking", "?") if why[k])
+            lines.append(f"labels that differ from the vote ({reasons}): {shown}{more}")
         if self.operator:
             rest = ", ".join(f"{k}={v}" for k, v in self.operator.items() if k != "name")
             lines.append(f"operator: {self.operator.get('name', '?')}" + (f" ({rest})" if rest else ""))
