@@ -327,6 +327,8 @@ class LabelReader:
             out["geometric_evidence"] = str(cfg.geometric_evidence)
             out["consensus"] = str(cfg.calibration.consensus.method)
             out["exclusive_evidence"] = str(cfg.exclusive_evidence)
+            if getattr(op, "check_compatibility", False):  # refusing operators: the channel's earlier labels
+                out["recalled_verdicts"] = str(cfg.recalled_verdicts)
         return out
 
 
