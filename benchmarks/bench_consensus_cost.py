@@ -21,6 +21,8 @@ from sgbelief.fusion.config import OperatorConfig
 
 CONFIGS = {
     "default (consensus + rivals)": {},
+    "default, no recalled verdicts": {"recalled_verdicts": "none"},
+    "default, posterior outcomes only": {"calibration": {"consensus": {"adjudicated_elements": "consensus"}}},
     "consensus only": {"exclusive_evidence": "none"},
     "rivals only": {"calibration": {"consensus": {"method": "none"}}},
     "neither": {"exclusive_evidence": "none", "calibration": {"consensus": {"method": "none"}}},

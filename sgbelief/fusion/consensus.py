@@ -133,6 +133,8 @@ class MapConsensus:
         self._merged_into = array("l")
         #: row of each element code in the last fit's posterior (-1: no claim)
         self._row_of_code = np.zeros(0, dtype=np.intp)
+        #: (posterior row, label code) of every channel label the last fit saw
+        self._geo_rows = np.zeros((0, 2), dtype=np.intp)
         self.n_at_fit = 0
         self.n_fits = 0
         #: no more refits (the operator's calibration is frozen): the last fit stays
@@ -280,7 +282,8 @@ class MapConsensus:
 
     def _element_outcomes(self, n_rows: int) -> tuple[np.ndarray, np.ndarray]:
         """Per (posterior row, class): how many of the channel's labels of the element decide the
-        class (n_dec) and how many of those corroborate it (n_pos); rows as in :meth:`fit_consensus`."""
+        class (n_dec) and how many of those corroborate it (n_pos); rows and labels as in the last
+        :meth:`fit_consensus`."""
         k = len(self._classes.names)
         n_pos, n_dec = np.zeros((n_rows, k)), np.zeros((n_rows, k))
         if not self.labels or self.outcomes is None:
@@ -293,9 +296,7 @@ class MapConsensus:
                 v = table.get(label)
                 if v is not None:
                     y[i, j] = v
-        row, idx = self._row_of_code, self._tasks.index
-        pairs = np.array([(row[c], code) for (node, _t), code in self.labels.items()
-                          if 0 <= (c := idx.get(node, -1)) < len(row) and row[c] >= 0], dtype=np.intp).reshape(-1, 2)
+        pairs = self._geo_rows  # (posterior row, label code) of each (element, time) label, from the last fit
         if len(pairs):
             ys = y[pairs[:, 1]]  # (labels, classes)
             np.add.at(n_dec, pairs[:, 0], (ys >= 0).astype(float))
@@ -326,7 +327,7 @@ class MapConsensus:
         row = self._row_of_code
         geo = [(row[i] if (i := self._tasks.index.get(node, -1)) >= 0 else -1, code)
                for (node, _t), code in self.labels.items()]
-        geo_arr = np.array([g for g in geo if g[0] >= 0], dtype=np.intp).reshape(-1, 2)
+        geo_arr = self._geo_rows = np.array([g for g in geo if g[0] >= 0], dtype=np.intp).reshape(-1, 2)
         tasks = np.concatenate([task, np.arange(n_t), geo_arr[:, 0]])
         workers = np.concatenate([ctx, np.full(n_t, n_ctx), np.full(len(geo_arr), n_ctx + 1)])
         labels = np.concatenate([cls * b + bins, support_base + support, geo_base + geo_arr[:, 1]])
