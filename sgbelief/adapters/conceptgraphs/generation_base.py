@@ -228,6 +228,7 @@ class GenerationFunctions:
             cands = candidate_matrix(scores[:, :n], threshold)
         else:
             best_of, max_of, cands = [0] * n_rows, [NEG_INF] * n_rows, None
+        merges: list[tuple[int, dict]] = []  # (position, detection) in row order
         for i in range(n_rows):
             det = detection_list[i]
             top = max_of[i]
@@ -240,13 +241,21 @@ class GenerationFunctions:
             targets = backend.targets_for(scores[i], j, objects, threshold, touched,
                                           candidates=None if cands is None else cands[i])
             backend.route_detection(det, targets)
-            if backend.pending_dict(objects[j]):  # a queued claim still reads this dict: apply first
-                backend.flush()
-            objects[j] = merge_one(objects[j], det)
-            self.merged.add(id(objects[j]))
+            merges.append((j, det))
+        self.merge_pass(objects, merges, merge_one)
         self.sync_labels(objects, touched)
         backend.end_frame()
         return objects
+
+    def merge_pass(self, objects: Any, merges: list[tuple[int, dict]], merge_one: MergeOne) -> None:
+        """The frame's geometric merges, in row order, after every detection of the frame was routed."""
+        if not merges:
+            return
+        self.backend.flush()  # the queued claims read dicts the merges change: apply them first
+        merged = self.merged
+        for j, det in merges:
+            objects[j] = merge_one(objects[j], det)
+            merged.add(id(objects[j]))
 
     def overlap_merge_loop(self, objects: Any, overlap: np.ndarray, ratio_thresh: float, visual_thresh: float,
                            text_thresh: float, merge_one: MergeOne, use_text: bool) -> tuple[Any, list]:
