@@ -138,9 +138,6 @@ class AliDevGeneration(GenerationFunctions):
         for i, j in enumerate(match_indices):
             det = detection_list[i]
             if j is None:
-                if tracker is not None:  # as ConceptGraphs' merge_obj_matches does
-                    counter_update(lambda: tracker.object_dict.update(
-                        {"id": det["id"], "first_discovered": tracker.curr_frame_idx}))
                 objects.append(det)
                 backend.frame_node(det)
                 touched.add(len(objects) - 1)
@@ -152,11 +149,21 @@ class AliDevGeneration(GenerationFunctions):
                 targets = {backend.frame_node(objects[j]): 1.0}
                 touched.add(j)
             backend.route_detection(det, targets)
-            if backend.pending_dict(objects[j]):  # a queued claim still reads this dict: apply first
-                backend.flush()
+        # ConceptGraphs' side of the frame, in row order, once every detection is routed (see
+        # GenerationFunctions.merge_pass): the tracker's record of each new object, the merges
+        if any(j is not None for j in match_indices):
+            backend.flush()  # the queued claims read dicts the merges change: apply them first
+        merged = self.merged
+        for i, j in enumerate(match_indices):
+            det = detection_list[i]
+            if j is None:
+                if tracker is not None:  # as ConceptGraphs' merge_obj_matches does
+                    counter_update(lambda: tracker.object_dict.update(
+                        {"id": det["id"], "first_discovered": tracker.curr_frame_idx}))
+                continue
             objects[j] = self.geo_merge(objects[j], det, downsample_voxel_size, dbscan_remove_noise, dbscan_eps,
                                         dbscan_min_points, spatial_sim_type, device, False)
-            self.merged.add(id(objects[j]))
+            merged.add(id(objects[j]))
         if tracker is not None:  # ConceptGraphs' MappingTracker counters, updated as the original does
             counter_update(lambda: tracker.increment_total_merges(len(match_indices) - match_indices.count(None)))
             counter_update(lambda: tracker.increment_total_objects(len(objects) - count_before))
