@@ -293,7 +293,7 @@ def pieces(repeat: int = 2000, rounds: int = 7) -> dict[str, float]:
             for _ in range(repeat):
                 backend.route_detection(det, targets)
             backend._pending.clear()  # the queued events are not applied (not part of the piece)
-            backend._pending_dicts.clear()
+            getattr(backend, "_pending_dicts", set()).clear()  # (older versions' bookkeeping of the same)
 
     def refresh() -> None:
         obj = objs[0]
@@ -310,7 +310,7 @@ def pieces(repeat: int = 2000, rounds: int = 7) -> dict[str, float]:
             for d in fresh:
                 backend.ensure_node(d)
             backend._pending.clear()
-            backend._pending_dicts.clear()
+            getattr(backend, "_pending_dicts", set()).clear()  # (older versions' bookkeeping of the same)
 
     def sync_one() -> None:
         touched = [0]

@@ -58,7 +58,7 @@ class InterleavedMain(MainGeneration):
             targets = backend.targets_for(scores[i], j, objects, threshold, touched,
                                           candidates=None if cands is None else cands[i])
             backend.route_detection(det, targets)
-            if backend.pending_dict(objects[j]):
+            if id(objects[j]) in backend.queued_dicts:  # a queued claim still reads this dict: apply first
                 backend.flush()
             objects[j] = merge_one(objects[j], det)
             self.merged.add(id(objects[j]))
@@ -101,7 +101,7 @@ class InterleavedAliDev(AliDevGeneration):
                 targets = {backend.frame_node(objects[j]): 1.0}
                 touched.add(j)
             backend.route_detection(det, targets)
-            if backend.pending_dict(objects[j]):
+            if id(objects[j]) in backend.queued_dicts:  # a queued claim still reads this dict: apply first
                 backend.flush()
             objects[j] = self.geo_merge(objects[j], det, downsample_voxel_size, dbscan_remove_noise, dbscan_eps,
                                         dbscan_min_points, spatial_sim_type, device, False)
@@ -167,6 +167,27 @@ det_st = st.tuples(st.one_of(st.none(), st.integers(0, 9)), st.one_of(st.none(),
 frames_st = st.lists(st.lists(det_st, min_size=1, max_size=6), min_size=1, max_size=4)
 
 
+def _track_queued_dicts(backend: ConceptGraphsBackend) -> None:
+    """The bookkeeping the interleaved loops relied on: ``backend.queued_dicts`` holds the ids of
+    the dicts whose claims are queued (their channels read them when the queue is applied)."""
+    queued: set[int] = set()
+    route, flush = backend.route_detection, backend.flush
+
+    def routed(det: dict, targets: Any) -> int:
+        n = route(det, targets)
+        if n and backend._pending:
+            queued.add(id(det))
+        return n
+
+    def flushed() -> None:
+        queued.clear()
+        flush()
+
+    backend.queued_dicts = queued  # type: ignore[attr-defined]
+    backend.route_detection = routed  # type: ignore[method-assign]
+    backend.flush = flushed  # type: ignore[method-assign]
+
+
 def _channel(det: dict, node: Any, t: int) -> str | None:
     """A channel reading the dict it is asked about (a map object's last class, after a merge too)."""
     names = det.get("class_name")
@@ -177,6 +198,8 @@ def _run(generation: str, interleaved: bool, frames: list, n_start: int, fresh: 
          uid: bool) -> tuple:
     backend = ConceptGraphsBackend("comod", context="t", class_names=CLASSES, print_summary=False,
                                    channel=_channel if channel else None)
+    if interleaved:
+        _track_queued_dicts(backend)
     log: list = []
     merge = _merge(log, fresh)
     k = 0

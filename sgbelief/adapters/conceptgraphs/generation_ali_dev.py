@@ -135,8 +135,10 @@ class AliDevGeneration(GenerationFunctions):
         cands = candidate_matrix(sims[:, :n_before], thr) if sims is not None and sims.ndim == 2 else None
         tracker = self.helper("tracker")
         count_before = getattr(tracker, "curr_object_count", 0) if tracker is not None else 0
+        rows: list[tuple[int | None, dict]] = []  # (match, detection), in row order
         for i, j in enumerate(match_indices):
             det = detection_list[i]
+            rows.append((j, det))
             if j is None:
                 objects.append(det)
                 backend.frame_node(det)
@@ -149,21 +151,15 @@ class AliDevGeneration(GenerationFunctions):
                 targets = {backend.frame_node(objects[j]): 1.0}
                 touched.add(j)
             backend.route_detection(det, targets)
-        # ConceptGraphs' side of the frame, in row order, once every detection is routed (see
-        # GenerationFunctions.merge_pass): the tracker's record of each new object, the merges
-        if any(j is not None for j in match_indices):
-            backend.flush()  # the queued claims read dicts the merges change: apply them first
-        merged = self.merged
-        for i, j in enumerate(match_indices):
-            det = detection_list[i]
-            if j is None:
-                if tracker is not None:  # as ConceptGraphs' merge_obj_matches does
-                    counter_update(lambda: tracker.object_dict.update(
-                        {"id": det["id"], "first_discovered": tracker.curr_frame_idx}))
-                continue
-            objects[j] = self.geo_merge(objects[j], det, downsample_voxel_size, dbscan_remove_noise, dbscan_eps,
-                                        dbscan_min_points, spatial_sim_type, device, False)
-            merged.add(id(objects[j]))
+
+        def record_new(det: dict) -> None:  # as ConceptGraphs' merge_obj_matches does
+            counter_update(lambda: tracker.object_dict.update(
+                {"id": det["id"], "first_discovered": tracker.curr_frame_idx}))
+
+        self.merge_pass(objects, rows,
+                        lambda o, d: self.geo_merge(o, d, downsample_voxel_size, dbscan_remove_noise, dbscan_eps,
+                                                    dbscan_min_points, spatial_sim_type, device, False),
+                        record_new if tracker is not None else None)
         if tracker is not None:  # ConceptGraphs' MappingTracker counters, updated as the original does
             counter_update(lambda: tracker.increment_total_merges(len(match_indices) - match_indices.count(None)))
             counter_update(lambda: tracker.increment_total_objects(len(objects) - count_before))

@@ -8,7 +8,9 @@ beliefs. Nothing here looks anything up in ConceptGraphs' modules or in the inst
 
 Per frame, a patched merge records the list positions its detections touched (targets, new
 objects, objects the script appended itself) and re-registers only those; the labels written are
-those of the nodes whose beliefs changed (:meth:`MapBeliefs.take_changed_nodes`).
+those of the nodes whose beliefs changed (:meth:`MapBeliefs.take_changed_nodes`). A frame's
+detections are all routed before ConceptGraphs' geometric merges of that frame run, in row order
+(:meth:`GenerationFunctions.merge_pass`).
 """
 
 from __future__ import annotations
@@ -211,7 +213,8 @@ class GenerationFunctions:
     # ---------------------------------------------------------------- shared loops
     def assign(self, detection_list: Any, objects: Any, agg_sim: Any, threshold: float, merge_one: MergeOne) -> Any:
         """Association loop: a new object when the row has no candidate, else spread the beliefs
-        over the candidates and merge the geometry into the argmax."""
+        over the candidates and merge the geometry into the argmax (every row routed first, then
+        the merges in row order: :meth:`merge_pass`)."""
         backend = self.backend
         # the frame's events in one update_many call; each object resolved to its node once
         with backend.batch(), backend.frame_lookups():
@@ -228,7 +231,7 @@ class GenerationFunctions:
             cands = candidate_matrix(scores[:, :n], threshold)
         else:
             best_of, max_of, cands = [0] * n_rows, [NEG_INF] * n_rows, None
-        merges: list[tuple[int, dict]] = []  # (position, detection) in row order
+        merges: list[tuple[int | None, dict]] = []  # (position, detection), in row order
         for i in range(n_rows):
             det = detection_list[i]
             top = max_of[i]
@@ -247,13 +250,25 @@ class GenerationFunctions:
         backend.end_frame()
         return objects
 
-    def merge_pass(self, objects: Any, merges: list[tuple[int, dict]], merge_one: MergeOne) -> None:
-        """The frame's geometric merges, in row order, after every detection of the frame was routed."""
-        if not merges:
-            return
-        self.backend.flush()  # the queued claims read dicts the merges change: apply them first
+    def merge_pass(self, objects: Any, rows: Iterable[tuple[int | None, dict]], merge_one: MergeOne,
+                   on_new: Callable[[dict], Any] | None = None) -> None:
+        """ConceptGraphs' side of a frame, run once every detection of the frame is routed: in row
+        order, each matched detection ``(j, det)`` merged into ``objects[j]``, and ``on_new(det)``
+        for each new object ``(None, det)``.
+
+        The frame's events are applied before the first merge: a queued claim's channel reads the
+        dict it came from (a map object registered in this frame), which a merge changes. The map
+        is the one routing each detection right before its own merge gives."""
         merged = self.merged
-        for j, det in merges:
+        flushed = False
+        for j, det in rows:
+            if j is None:
+                if on_new is not None:
+                    on_new(det)
+                continue
+            if not flushed:
+                self.backend.flush()
+                flushed = True
             objects[j] = merge_one(objects[j], det)
             merged.add(id(objects[j]))
 

@@ -160,7 +160,6 @@ class MapBeliefs(LabelReader):
         self._skip_reports = isinstance(operator, BaseOperator)
         #: routed events waiting for flush(): (event, channel, class name)
         self._pending: list[tuple[Any, Any, str]] = []
-        self._pending_dicts: set[int] = set()
         self._batch_open = False
         #: id(obj) -> (obj, node) resolved in the current frame (frame_lookups), else None
         self._frame_nodes: dict[int, tuple[Any, Any]] | None = None
@@ -323,8 +322,6 @@ class MapBeliefs(LabelReader):
             pending.append((EvidenceEvent.trusted(targets, pred, conf, context, claim.t, next_event_id()),
                             channel, name))
             n_events += 1
-        if n_events:
-            self._pending_dicts.add(id(det))
         changed = self._changed
         for node in targets:
             self._detections_per_node[node] += len(claims)
@@ -341,7 +338,6 @@ class MapBeliefs(LabelReader):
         if not pending:
             return
         self._pending = []
-        self._pending_dicts.clear()
         self._apply(pending)
         null, log, has_channel = self._null, self.event_log, self._has_channel
         for event, channel, name in pending:
@@ -376,11 +372,6 @@ class MapBeliefs(LabelReader):
                     self._note_resolutions(report.resolutions)
                 if self.keep_reports:
                     self.reports.append(report)
-
-    def pending_dict(self, obj: Any) -> bool:
-        """Whether a queued event still reads ``obj`` (a detection / object dict): the caller
-        flushes before changing it."""
-        return id(obj) in self._pending_dicts
 
     def _count_claim(self, class_name: str, pred: str, conf: float, answers: Mapping[Any, str] | None) -> None:
         """Count one routed claim for :meth:`summary`: verified, refused or unverifiable, by the
