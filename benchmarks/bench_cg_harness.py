@@ -41,7 +41,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="time the fusion step with this process's CPU time (time.process_time) instead of "
                          "wall time: steadier when other jobs share the machine (pair with OMP_NUM_THREADS=1); "
                          "also reports the backend's cost per detection beside the operator's cost per event "
-                         "when the run's events are replayed (update_many into a fresh graph)")
+                         "when the run's events are replayed (update_many into a fresh graph), and the backend's own "
+                         "CPU time inside the merge step (its per-frame merge minus ConceptGraphs' geometric "
+                         "merges in it)")
     ap.add_argument("--clutter", type=int, default=0,
                     help="scatter this many small objects in the room: more detections per frame (a median of "
                          "10 with 25 at 128x96 or 192x144, 19 with 150 at 128x96, 29 with 200 at 192x144); label "
@@ -82,9 +84,16 @@ def main(argv: list[str] | None = None) -> int:
     for ch in [c for c in args.channels.split(",") if c]:
         t0 = time.perf_counter()
         backend = H.make_backend(args.operator, H.make_channel(world, ch), operator_config=args.operator_config)
+        own = None
         if args.cpu_time:
             backend.event_log = []  # the run's events, replayed below
-        r = H.run(world, cg, args.cg, backend=backend, seed=args.seed, prepopulate=pre)
+            own = OwnTime()
+            own.install()
+        try:
+            r = H.run(world, cg, args.cg, backend=backend, seed=args.seed, prepopulate=pre)
+        finally:
+            if own is not None:
+                own.uninstall()
         s = r.summary
         if args.objects:
             _medians(gen, f"{args.operator}/{ch}", r)
@@ -104,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
             out["runs"][-1].update(_per_frame(r))
         if args.cpu_time:
             cost = _cost_per_detection(backend, vote, r)
+            cost["own_us_per_detection"] = own.us_per_detection() if own is not None else float("nan")
+            cost["own_ratio"] = cost["own_us_per_detection"] / cost["replay_us_per_event"] \
+                if cost["replay_us_per_event"] else float("nan")
             out["runs"][-1].update(cost)
             print(f"[{gen}] {args.operator}/{ch}: backend {cost['backend_us_per_detection']:.1f} us per detection "
                   f"(median over {cost['frames']} frames of (merge with - without) / detections; "
@@ -113,9 +125,92 @@ def main(argv: list[str] | None = None) -> int:
                   f"{cost['channel_us_per_detection']:.1f} us; without it {cost['ratio_without_channel']:.2f}); "
                   f"added to the fusion step {cost['added_pct']:+.1f} % (median merge delta / median CG step; "
                   f"median {cost['n_dets_median']:.0f} detections, {cost['n_map_median']:.0f} map objects)")
+            print(f"[{gen}] {args.operator}/{ch}: backend's own CPU time inside the merge step "
+                  f"{cost['own_us_per_detection']:.1f} us per detection (median over frames of (per-frame merge - "
+                  f"ConceptGraphs' geometric merges in it) / detections); ratio to replay {cost['own_ratio']:.2f}")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
     return 0
+
+
+class OwnTime:
+    """The backend's own CPU time inside ConceptGraphs' merge step, frame by frame: the patched
+    per-frame merge (and ali-dev's match step) minus ConceptGraphs' geometric merges run inside it.
+
+    A steadier figure than the difference of two runs' merge steps (which also holds ConceptGraphs'
+    own loop, replaced by the backend's, and swings with the machine): one run, no subtraction of
+    medians. The wrappers go on the generation classes before the backend is installed."""
+
+    def __init__(self) -> None:
+        #: per per-frame merge: (own CPU seconds, detections)
+        self.frames: list[tuple[float, int]] = []
+        self._undo: list[tuple[type, str, object]] = []
+        self._geo: float | None = None  # seconds in geometric merges of the current frame (None: outside)
+        self._match = 0.0
+
+    def install(self) -> None:
+        from sgbelief.adapters.conceptgraphs.generation_ali_dev import AliDevGeneration
+        from sgbelief.adapters.conceptgraphs.generation_main import MainGeneration
+
+        self._frame(MainGeneration, "merge_detections_to_objects", 1)
+        self._frame(AliDevGeneration, "merge_obj_matches", 0)
+        for cls in (MainGeneration, AliDevGeneration):
+            self._inner(cls, "geo_merge")
+        fn = AliDevGeneration.match_detections_to_objects
+
+        def match(gen: object, *a: object, **k: object) -> object:
+            t0 = time.process_time()
+            try:
+                return fn(gen, *a, **k)  # type: ignore[arg-type]
+            finally:
+                self._match += time.process_time() - t0
+
+        self._set(AliDevGeneration, "match_detections_to_objects", match)
+
+    def uninstall(self) -> None:
+        for cls, name, fn in reversed(self._undo):
+            setattr(cls, name, fn)
+        self._undo.clear()
+
+    def us_per_detection(self) -> float:
+        """Median over frames of the backend's own µs per detection (the first timed frame, which
+        registers a pre-populated map at once, is left out when there are others)."""
+        per = [1e6 * sec / max(n, 1) for sec, n in self.frames]
+        return float(np.median(per[1:] if len(per) > 1 else per)) if per else float("nan")
+
+    def _set(self, cls: type, name: str, fn: object) -> None:
+        self._undo.append((cls, name, cls.__dict__[name]))
+        setattr(cls, name, fn)
+
+    def _frame(self, cls: type, name: str, pos: int) -> None:
+        fn = getattr(cls, name)
+
+        def frame(gen: object, *a: object, **k: object) -> object:
+            dets = k.get("detection_list", a[pos] if len(a) > pos else ())
+            self._geo = 0.0
+            t0 = time.process_time()
+            try:
+                return fn(gen, *a, **k)
+            finally:
+                total = time.process_time() - t0 + self._match
+                self.frames.append((total - self._geo, len(dets)))  # type: ignore[arg-type]
+                self._geo, self._match = None, 0.0
+
+        self._set(cls, name, frame)
+
+    def _inner(self, cls: type, name: str) -> None:
+        fn = getattr(cls, name)
+
+        def inner(gen: object, *a: object, **k: object) -> object:
+            if self._geo is None:  # outside a per-frame merge (ConceptGraphs' post passes)
+                return fn(gen, *a, **k)
+            t0 = time.process_time()
+            try:
+                return fn(gen, *a, **k)
+            finally:
+                self._geo += time.process_time() - t0
+
+        self._set(cls, name, inner)
 
 
 def _cost_per_detection(backend: object, vote: H.RunResult, r: H.RunResult) -> dict:
