@@ -4,7 +4,8 @@ Each fast path is checked against the path it replaces, on inputs drawn by hypot
 the one-entry claim reader against the entry-by-entry reader, the per-frame memoised node
 look-ups against ``ensure_node``, ``refresh_node_geometry`` against ``refresh_geometry``, the
 scored candidate matrix against the row-by-row candidates, ``IdentityMap.find`` + ``register(fp)``
-against ``lookup`` + ``register``, ``EvidenceEvent.trusted`` against the validating constructor
+against ``lookup`` + ``register``, the fingerprint's entry reader against ``.item()`` alone,
+``EvidenceEvent.trusted`` against the validating constructor
 and ``SceneGraph.add_node``'s box check against the generator it replaced.
 """
 
@@ -23,7 +24,7 @@ from sgbelief.adapters.conceptgraphs import ConceptGraphsBackend
 from sgbelief.adapters.conceptgraphs.claims import _read_all, read_claims
 from sgbelief.adapters.conceptgraphs.generation_base import candidate_matrix
 from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
-from sgbelief.adapters.conceptgraphs.identity import IdentityMap
+from sgbelief.adapters.conceptgraphs.identity import IdentityMap, _plain
 from sgbelief.fusion.events import EvidenceEvent
 from sgbelief.graph.scene_graph import SceneGraphModel
 
@@ -237,6 +238,23 @@ def test_find_and_register_with_its_fingerprint_equal_lookup_and_register(keys: 
         if node is None:
             assert fast.register(obj, fp) == plain.register(obj)
     assert fast._by_fp == plain._by_fp and fast._known == plain._known
+
+
+def _plain_by_item(value: Any) -> Any:
+    """The fingerprint's entry reader without its type check (``.item()`` or the value itself)."""
+    try:
+        return value.item()
+    except AttributeError:
+        return value
+
+
+@settings(max_examples=100, deadline=None)
+@given(value=st.one_of(st.integers(), st.text(max_size=4), st.booleans(), st.integers(-9, 9).map(np.int64),
+                       st.floats(width=32, allow_nan=False).map(np.float32), st.integers(0, 9).map(np.array),
+                       st.none(), st.floats(allow_nan=False)))
+def test_fingerprint_entry_reader_equals_reading_by_item(value: Any) -> None:
+    fast, plain = _plain(value), _plain_by_item(value)
+    assert fast == plain and type(fast) is type(plain)
 
 
 # ---------------------------------------------------------------- events and nodes

@@ -37,6 +37,8 @@ def fingerprint(obj: dict) -> Fingerprint | None:
 
 
 def _plain(value: Any) -> Any:
+    if type(value) is int or type(value) is str:  # no .item(): spare the failing look-up
+        return value
     try:
         return value.item()  # numpy / torch scalars
     except AttributeError:
