@@ -27,7 +27,7 @@ __all__ = ["LabelMemory"]
 class LabelMemory:
     """Per element: how many times (distinct frames) the channel gave it each label."""
 
-    __slots__ = ("counts", "_last_t", "min_labels")
+    __slots__ = ("counts", "_last_t", "min_labels", "_held")
 
     def __init__(self, min_labels: int = 1) -> None:
         #: element -> {label: frames it bore that label}
@@ -35,24 +35,65 @@ class LabelMemory:
         self._last_t: dict[Any, int] = {}
         #: decisive labels needed before an outcome is recalled
         self.min_labels = min_labels
+        #: element -> predicates it holds claims for that no decisive label has judged yet
+        #: (``recalled_verdicts: retroactive``)
+        self._held: dict[Any, set[str]] = {}
 
-    def add(self, node: Any, t: int, label: str) -> None:
-        """The channel labelled ``node`` ``label`` at time ``t`` (the first label of a frame counts)."""
+    def add(self, node: Any, t: int, label: str) -> bool:
+        """The channel labelled ``node`` ``label`` at time ``t`` (the first label of a frame counts);
+        True when it counted."""
         if self._last_t.get(node) == t:
-            return
+            return False
         self._last_t[node] = t
         held = self.counts.get(node)
         if held is None:
             held = self.counts[node] = {}
         held[label] = held.get(label, 0) + 1
+        return True
 
     def recalled(self, node: Any, outcomes: Mapping[str, int]) -> int | None:
         """The outcome the element's labels agree on for a predicate with ``outcomes`` (label -> y), or None."""
         held = self.counts.get(node)
         return None if not held else recalled_outcome(outcomes, held, self.min_labels)
 
+    def hold(self, node: Any, predicate: str, outcomes: Mapping[str, int]) -> None:
+        """An unadjudicated claim for phi (outcome table ``outcomes``) was applied at ``node``:
+        remember the pair until the element's labels judge it, unless one of them already asserts
+        phi (then they never deny it unanimously)."""
+        held = self.counts.get(node)
+        if held and any(outcomes.get(label) == 1 for label in held):
+            return
+        preds = self._held.get(node)
+        if preds is None:
+            preds = self._held[node] = set()
+        preds.add(predicate)
+
+    def judged(self, node: Any, tables: Mapping[str, Mapping[str, int]]) -> list[str]:
+        """After a new label of ``node``: the held predicates its labels now unanimously deny
+        (their claims are withdrawn), each returned once. A predicate some label asserts is
+        released (its claims can never be unanimously denied); one with no decisive label, or
+        fewer denials than ``min_labels``, stays held."""
+        preds = self._held.get(node)
+        if not preds:
+            return []
+        held = self.counts[node]
+        denied: list[str] = []
+        for pred in sorted(preds):  # a fixed order: the withdrawals' order is part of the map's history
+            y = recalled_outcome(tables[pred], held, self.min_labels)
+            if y == 0:
+                denied.append(pred)
+                preds.discard(pred)
+            elif any(tables[pred].get(label) == 1 for label in held):
+                preds.discard(pred)
+        if not preds:
+            del self._held[node]
+        return denied
+
     def merge(self, keep: Any, absorb: Any) -> None:
-        """``absorb`` was merged into ``keep``: its labels are keep's."""
+        """``absorb`` was merged into ``keep``: its labels and held predicates are keep's."""
+        moved_held = self._held.pop(absorb, None)
+        if moved_held:
+            self._held.setdefault(keep, set()).update(moved_held)
         moved = self.counts.pop(absorb, None)
         t = self._last_t.pop(absorb, None)
         if moved:

@@ -11,6 +11,11 @@ entries leave them:
 - Q⊥ (refused ⊥ claims): a later T verdict at the same (v, phi) within T_disagree marks it
   resolved, *not* committed; after T_disagree it expires unresolved; an explicit confirmation
   either commits it (human override) or dismisses it.
+
+A committed entry leaves the belief in one more way (``recalled_verdicts: retroactive``,
+docs/method.md §8): a claim committed while the channel had not adjudicated its element is
+withdrawn once every decisive label the element has received contradicts it
+(:func:`withdraw_unadjudicated`).
 """
 
 from __future__ import annotations
@@ -21,10 +26,13 @@ from typing import Any
 from sgbelief.errors import QueueError
 from sgbelief.fusion.protocol import QueueResolution
 from sgbelief.graph.entry_log import EntryLog
-from sgbelief.graph.provenance_log import EntryStatus, ProvenanceEntry
+from sgbelief.graph.provenance_log import EntryStatus, EntryVerdict, ProvenanceEntry
 
 _QUARANTINED = EntryStatus.QUARANTINED
 _REFUSED = EntryStatus.REFUSED
+_WITHDRAWN = EntryStatus.WITHDRAWN
+#: committed entries a later unanimous verdict can withdraw (a human confirmation is never withdrawn)
+_WITHDRAWABLE = frozenset({EntryStatus.COMMITTED, EntryStatus.RELEASED})
 
 
 def quarantine_feedback(
@@ -54,6 +62,26 @@ def resolve_disagreements(store: EntryLog, node: Any, predicate: str, t: int) ->
         if entry.status is EntryStatus.REFUSED:
             store.transition(entry, EntryStatus.RESOLVED)
             out.append(QueueResolution(entry.event_id, node, predicate, "resolved", t))
+    return out
+
+
+def withdraw_unadjudicated(store: EntryLog, node: Any, predicate: str, t: int) -> list[QueueResolution]:
+    """Every decisive label of v so far denies phi: the claims for phi at v that were committed
+    while the channel said nothing decisive there (verdict ∅, stance +1) stop counting (status
+    ``withdrawn``), and so does the evidence each wrote against its rival classes at v
+    (``exclusive_evidence: rivals``, same event).
+
+    Eq. 4 holds as for any status change: the belief is the prior plus the entries still counted.
+    """
+    out: list[QueueResolution] = []
+    for entry in store.entries(node, predicate):
+        if entry.status not in _WITHDRAWABLE or entry.stance != 1 or entry.verdict is not EntryVerdict.NO_CLAIM:
+            continue
+        store.transition(entry, _WITHDRAWN)
+        out.append(QueueResolution(entry.event_id, node, predicate, "withdrawn", t))
+        for other in store.event_entries(entry.event_id):
+            if other.node == node and other.verdict is EntryVerdict.EXCLUSION and other.status in _WITHDRAWABLE:
+                store.transition(other, _WITHDRAWN)
     return out
 
 
