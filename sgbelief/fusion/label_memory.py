@@ -7,7 +7,10 @@ other frames. :class:`LabelMemory` keeps those labels per map (one per provenanc
 support counts) and :func:`~sgbelief.fusion.rules.recalled_outcome` reads the outcome they agree on.
 ``comod`` refuses a claim the recalled outcome contradicts (``recalled_verdicts: unanimous``,
 docs/method.md §8); nothing is written for it but the refused entry, so Eq. 4 and exact retraction
-hold as for any refusal.
+hold as for any refusal. With ``recalled_verdicts: retroactive`` (the default) the memory also
+holds, per element, the predicates it took unadjudicated claims for before any label judged them,
+and says which of them a new label makes unanimously denied (:meth:`LabelMemory.judged`): those
+claims are withdrawn (:func:`~sgbelief.fusion.queues.withdraw_unadjudicated`).
 
 A label is an observation of the channel, not part of a claim: retracting the claim it came with
 does not unsee it. Labels of claims below the targeting threshold tau_T count too (the channel

@@ -54,7 +54,7 @@ STATUS_MEANINGS: dict[str, str] = {
     "withdrawn": "withdrawn: the element's labels, later, all contradicted it",
 }
 #: the refusal family: a ⊥ claim, whether still pending (refused) or closed since
-REFUSED_STATUSES: frozenset[str] = frozenset({"refused", "resolved", "expired", "dismissed", "withdrawn"})
+REFUSED_STATUSES: frozenset[str] = frozenset({"refused", "resolved", "expired", "dismissed"})
 #: verdict symbol -> matplotlib marker
 VERDICT_MARKERS: dict[str, str] = {"⊤": "^", "⊥": "X", "∅": "o", "?": "o", "exclusion": "v"}
 
