@@ -95,6 +95,9 @@ def test_the_paper_variant_and_cal_do_not_recall() -> None:
     assert make_operator("comod_paper", None, _table()).config.recalled_verdicts == "none"
     assert not make_operator("cal", None, _table()).recalls_verdicts
     assert make_operator("comod", None, _table()).recalls_verdicts
+    assert make_operator("comod", None, _table()).withdraws_unadjudicated  # the default: retroactive
+    assert not make_operator("comod", {"recalled_verdicts": "unanimous"}, _table()).withdraws_unadjudicated
+    assert not make_operator("comod_paper", None, _table()).withdraws_unadjudicated
 
 
 @pytest.mark.parametrize("engine", ["fast", "reference"])
@@ -156,7 +159,7 @@ def test_later_unanimous_labels_withdraw_the_claims_committed_unseen(engine: str
     claims, so no refusal ever touched the pair)."""
     plain = {"exclusive_evidence": "none"}  # the chair claims then say nothing of bed
     on = make_operator("comod", {**plain, "recalled_verdicts": "retroactive"}, _table(), engine=engine)
-    off = make_operator("comod", plain, _table(), engine=engine)
+    off = make_operator("comod", {**plain, "recalled_verdicts": "unanimous"}, _table(), engine=engine)
     graphs = []
     for op in (on, off):
         g = SceneGraph(create_nodes=True)
