@@ -119,24 +119,28 @@ def test_held_predicates_are_judged_once_by_the_elements_labels() -> None:
     mem.hold("v", "is_bed", tables["is_bed"])
     mem.hold("v", "is_sofa", tables["is_sofa"])
     mem.add("v", 1, "otherprop")  # decides nothing: both stay held
-    assert mem.judged("v", tables) == []
+    assert mem.judged("v", tables) == ([], [])
     mem.add("v", 2, "chair")  # denies bed and sofa, unanimously
-    assert mem.judged("v", tables) == ["is_bed", "is_sofa"]
+    assert mem.judged("v", tables) == (["is_bed", "is_sofa"], [])
     mem.add("v", 3, "chair")
-    assert mem.judged("v", tables) == []  # judged once
+    assert mem.judged("v", tables) == ([], [])  # judged once
+    mem.add("v", 4, "bed")  # the channel changed its mind on bed: the withdrawal lapses, once
+    assert mem.judged("v", tables) == ([], ["is_bed"])
+    mem.add("v", 5, "bed")
+    assert mem.judged("v", tables) == ([], [])
     mem.hold("w", "is_bed", tables["is_bed"])
     mem.add("w", 1, "bed")  # asserts: released, never withdrawn
-    assert mem.judged("w", tables) == []
+    assert mem.judged("w", tables) == ([], [])
     mem.add("w", 2, "chair")
-    assert mem.judged("w", tables) == []
+    assert mem.judged("w", tables) == ([], [])
     mem.hold("w", "is_bed", tables["is_bed"])  # a label already asserts bed: nothing to hold
-    assert mem.judged("w", tables) == []
+    assert mem.judged("w", tables) == ([], [])
     strict = LabelMemory(min_labels=2)
     strict.hold("u", "is_bed", tables["is_bed"])
     strict.add("u", 1, "chair")
-    assert strict.judged("u", tables) == []  # one denial is not enough yet: still held
+    assert strict.judged("u", tables) == ([], [])  # one denial is not enough yet: still held
     strict.add("u", 2, "sofa")
-    assert strict.judged("u", tables) == ["is_bed"]
+    assert strict.judged("u", tables) == (["is_bed"], [])
 
 
 def _retro_stream(labels_then: list[str | None], rival: bool = False) -> list:
@@ -203,3 +207,23 @@ def test_a_label_that_ever_asserted_the_class_withdraws_nothing(engine: str) -> 
     op.update_many(g, _retro_stream(["bed", "chair", "chair"]))
     assert op.stats["withdrawn"] == 0
     assert all(e.status is EntryStatus.COMMITTED for e in g.provenance.entries("v", "is_bed"))
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_a_withdrawal_lapses_when_a_later_label_asserts_the_class(engine: str) -> None:
+    """The channel denied bed, then said bed: the labels no longer agree, the unseen bed claims count
+    again, exactly as before they were withdrawn."""
+    plain = {"exclusive_evidence": "none"}
+    op = make_operator("comod", {**plain, "recalled_verdicts": "retroactive"}, _table(), engine=engine)
+    fwd = make_operator("comod", {**plain, "recalled_verdicts": "unanimous"}, _table(), engine=engine)
+    g, g_fwd = SceneGraph(create_nodes=True), SceneGraph(create_nodes=True)
+    stream = _retro_stream(["chair", "otherprop", "bed"])
+    op.update_many(g, stream[:5])  # three unseen bed claims, then the chair claim labelled chair
+    assert g.probability("v", "is_bed") <= 0.5 and op.stats["withdrawn"] == 3
+    op.update_many(g, stream[5:])
+    fwd.update_many(g_fwd, stream)
+    assert op.stats["reinstated"] == 3
+    beds = [e for e in g.provenance.entries("v", "is_bed") if e.event_id.startswith("bed")]
+    assert all(e.status is EntryStatus.COMMITTED for e in beds)
+    assert g.provenance.alpha_beta("v", "is_bed") == pytest.approx(g_fwd.provenance.alpha_beta("v", "is_bed"))
+    assert g.provenance.alpha_beta("v", "is_bed") == pytest.approx(g.provenance.reconstruct("v", "is_bed"))

@@ -313,7 +313,7 @@ def apply_fused(
                 for y, sctx in new_outcomes:
                     add(sctx, pred, c, y)
             if resolutions:
-                op._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved", "withdrawn")])
+                op._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved", "withdrawn", "reinstated")])
                 out += resolutions
             if report:
                 reports.append(make_report((eid, t, pred, tuple(outcomes), tuple(resolutions))))  # type: ignore[union-attr]

@@ -30,7 +30,7 @@ __all__ = ["LabelMemory"]
 class LabelMemory:
     """Per element: how many times (distinct frames) the channel gave it each label."""
 
-    __slots__ = ("counts", "_last_t", "min_labels", "_held")
+    __slots__ = ("counts", "_last_t", "min_labels", "_held", "_withdrawn")
 
     def __init__(self, min_labels: int = 1) -> None:
         #: element -> {label: frames it bore that label}
@@ -41,6 +41,8 @@ class LabelMemory:
         #: element -> predicates it holds claims for that no decisive label has judged yet
         #: (``recalled_verdicts: retroactive``)
         self._held: dict[Any, set[str]] = {}
+        #: element -> predicates whose unadjudicated claims are withdrawn while its labels deny them
+        self._withdrawn: dict[Any, set[str]] = {}
 
     def add(self, node: Any, t: int, label: str) -> bool:
         """The channel labelled ``node`` ``label`` at time ``t`` (the first label of a frame counts);
@@ -71,32 +73,44 @@ class LabelMemory:
             preds = self._held[node] = set()
         preds.add(predicate)
 
-    def judged(self, node: Any, tables: Mapping[str, Mapping[str, int]]) -> list[str]:
-        """After a new label of ``node``: the held predicates its labels now unanimously deny
-        (their claims are withdrawn), each returned once. A predicate some label asserts is
-        released (its claims can never be unanimously denied); one with no decisive label, or
-        fewer denials than ``min_labels``, stays held."""
-        preds = self._held.get(node)
-        if not preds:
-            return []
-        held = self.counts[node]
+    def judged(self, node: Any, tables: Mapping[str, Mapping[str, int]]) -> tuple[list[str], list[str]]:
+        """After a new label of ``node``: (denied, reinstated). ``denied``: the held predicates its
+        labels now unanimously deny (their unadjudicated claims are withdrawn), each returned once; a
+        held predicate some label asserts is released (its claims can never be unanimously denied);
+        one with no decisive label, or fewer denials than ``min_labels``, stays held.
+        ``reinstated``: the withdrawn predicates a label now asserts: the labels no longer agree,
+        so, as the recalled verdict lapses, the withdrawal is undone (once; they stay mixed)."""
         denied: list[str] = []
-        for pred in sorted(preds):  # a fixed order: the withdrawals' order is part of the map's history
-            y = recalled_outcome(tables[pred], held, self.min_labels)
-            if y == 0:
-                denied.append(pred)
-                preds.discard(pred)
-            elif any(tables[pred].get(label) == 1 for label in held):
-                preds.discard(pred)
-        if not preds:
-            del self._held[node]
-        return denied
+        reinstated: list[str] = []
+        held = self.counts[node]
+        gone = self._withdrawn.get(node)
+        if gone:
+            for pred in sorted(gone):  # a fixed order: the map's history must not depend on hashing
+                if any(tables[pred].get(label) == 1 for label in held):
+                    reinstated.append(pred)
+                    gone.discard(pred)
+            if not gone:
+                del self._withdrawn[node]
+        preds = self._held.get(node)
+        if preds:
+            for pred in sorted(preds):
+                y = recalled_outcome(tables[pred], held, self.min_labels)
+                if y == 0:
+                    denied.append(pred)
+                    preds.discard(pred)
+                    self._withdrawn.setdefault(node, set()).add(pred)
+                elif any(tables[pred].get(label) == 1 for label in held):
+                    preds.discard(pred)
+            if not preds:
+                del self._held[node]
+        return denied, reinstated
 
     def merge(self, keep: Any, absorb: Any) -> None:
         """``absorb`` was merged into ``keep``: its labels and held predicates are keep's."""
-        moved_held = self._held.pop(absorb, None)
-        if moved_held:
-            self._held.setdefault(keep, set()).update(moved_held)
+        for index in (self._held, self._withdrawn):
+            moved_preds = index.pop(absorb, None)
+            if moved_preds:
+                index.setdefault(keep, set()).update(moved_preds)
         moved = self.counts.pop(absorb, None)
         t = self._last_t.pop(absorb, None)
         if moved:

@@ -14,8 +14,9 @@ entries leave them:
 
 A committed entry leaves the belief in one more way (``recalled_verdicts: retroactive``,
 docs/method.md §8): a claim committed while the channel had not adjudicated its element is
-withdrawn once every decisive label the element has received contradicts it
-(:func:`withdraw_unadjudicated`).
+withdrawn while every decisive label the element has received contradicts it
+(:func:`withdraw_unadjudicated`), and reinstated when a later label asserts it
+(:func:`reinstate_withdrawn`).
 """
 
 from __future__ import annotations
@@ -31,8 +32,7 @@ from sgbelief.graph.provenance_log import EntryStatus, EntryVerdict, ProvenanceE
 _QUARANTINED = EntryStatus.QUARANTINED
 _REFUSED = EntryStatus.REFUSED
 _WITHDRAWN = EntryStatus.WITHDRAWN
-#: committed entries a later unanimous verdict can withdraw (a human confirmation is never withdrawn)
-_WITHDRAWABLE = frozenset({EntryStatus.COMMITTED, EntryStatus.RELEASED})
+_COMMITTED = EntryStatus.COMMITTED
 
 
 def quarantine_feedback(
@@ -67,21 +67,38 @@ def resolve_disagreements(store: EntryLog, node: Any, predicate: str, t: int) ->
 
 def withdraw_unadjudicated(store: EntryLog, node: Any, predicate: str, t: int) -> list[QueueResolution]:
     """Every decisive label of v so far denies phi: the claims for phi at v that were committed
-    while the channel said nothing decisive there (verdict ∅, stance +1) stop counting (status
-    ``withdrawn``), and so does the evidence each wrote against its rival classes at v
-    (``exclusive_evidence: rivals``, same event).
+    while the channel said nothing decisive there (status ``committed``, verdict ∅, stance +1)
+    stop counting (status ``withdrawn``), and so does the evidence each wrote against its rival
+    classes at v (``exclusive_evidence: rivals``, same event). A human's confirmation, a claim
+    released from quarantine at w/k and a compacted bucket are never withdrawn.
 
     Eq. 4 holds as for any status change: the belief is the prior plus the entries still counted.
     """
     out: list[QueueResolution] = []
     for entry in store.entries(node, predicate):
-        if entry.status not in _WITHDRAWABLE or entry.stance != 1 or entry.verdict is not EntryVerdict.NO_CLAIM:
+        if entry.status is not _COMMITTED or entry.stance != 1 or entry.verdict is not EntryVerdict.NO_CLAIM:
             continue
         store.transition(entry, _WITHDRAWN)
         out.append(QueueResolution(entry.event_id, node, predicate, "withdrawn", t))
         for other in store.event_entries(entry.event_id):
-            if other.node == node and other.verdict is EntryVerdict.EXCLUSION and other.status in _WITHDRAWABLE:
+            if other.node == node and other.verdict is EntryVerdict.EXCLUSION and other.status is _COMMITTED:
                 store.transition(other, _WITHDRAWN)
+    return out
+
+
+def reinstate_withdrawn(store: EntryLog, node: Any, predicate: str, t: int) -> list[QueueResolution]:
+    """A label of v now asserts phi, so its labels no longer deny it unanimously: the claims
+    :func:`withdraw_unadjudicated` withdrew at (v, phi) count again (status ``committed``), with
+    their evidence against rival classes; exactly the map the withdrawal interrupted."""
+    out: list[QueueResolution] = []
+    for entry in store.entries(node, predicate):
+        if entry.status is not _WITHDRAWN or entry.verdict is not EntryVerdict.NO_CLAIM:
+            continue
+        store.transition(entry, _COMMITTED)
+        out.append(QueueResolution(entry.event_id, node, predicate, "reinstated", t))
+        for other in store.event_entries(entry.event_id):
+            if other.node == node and other.verdict is EntryVerdict.EXCLUSION and other.status is _WITHDRAWN:
+                store.transition(other, _COMMITTED)
     return out
 
 

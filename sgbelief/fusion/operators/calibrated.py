@@ -220,7 +220,7 @@ class CalibratedOperator(BaseOperator):
                              tally[Action.QUARANTINED], tally[Action.REFUSED])
             self._feed_calibration(event, verified)
             if resolutions:
-                self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved", "withdrawn")])
+                self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved", "withdrawn", "reinstated")])
                 out += resolutions
             if reports is not None:
                 reports.append(make_report((event.id, event.t, event.predicate, tuple(outcomes), tuple(resolutions))))
@@ -282,12 +282,17 @@ class CalibratedOperator(BaseOperator):
         return action, v, da, db, resolutions
 
     def _withdraw_judged(self, prov: EntryLog, memory: LabelMemory, node: Any, t: int) -> list[QueueResolution]:
-        """After a new label of v: for each predicate whose claims at v came while no decisive label
-        had judged them and that v's labels now unanimously deny (:meth:`LabelMemory.judged`), those
-        claims are withdrawn (:func:`~sgbelief.fusion.queues.withdraw_unadjudicated`). Each pair is
-        judged once: from then on the recalled verdict refuses such claims as they come."""
+        """After a new label of v (:meth:`LabelMemory.judged`): the predicates whose claims at v came
+        while no decisive label had judged them and that v's labels now unanimously deny have those
+        claims withdrawn (:func:`~sgbelief.fusion.queues.withdraw_unadjudicated`); predicates
+        withdrawn earlier that a label now asserts have them reinstated
+        (:func:`~sgbelief.fusion.queues.reinstate_withdrawn`). From a withdrawal on, the recalled
+        verdict refuses such claims as they come, as long as the labels stay unanimous."""
+        denied, reinstated = memory.judged(node, self.vocabulary.outcome_tables())  # type: ignore[union-attr]
         out: list[QueueResolution] = []
-        for pred in memory.judged(node, self.vocabulary.outcome_tables()):  # type: ignore[union-attr]
+        for pred in reinstated:
+            out += queues.reinstate_withdrawn(prov, node, pred, t)
+        for pred in denied:
             out += queues.withdraw_unadjudicated(prov, node, pred, t)
         return out
 
