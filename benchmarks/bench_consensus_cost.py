@@ -21,6 +21,7 @@ from sgbelief.fusion.config import OperatorConfig
 
 CONFIGS = {
     "default (consensus + rivals)": {},
+    "default, recalled verdicts forward only": {"recalled_verdicts": "unanimous"},
     "default, no recalled verdicts": {"recalled_verdicts": "none"},
     "default, posterior outcomes only": {"calibration": {"consensus": {"adjudicated_elements": "consensus"}}},
     "consensus only": {"exclusive_evidence": "none"},

@@ -153,7 +153,9 @@ def test_claims_unseen_at_an_element_the_channel_denies_elsewhere_do_not_commit(
     from sgbelief.fusion.channel import FrameLabels
 
     def run(adjudicated: str):
-        cfg = {"calibration": {"consensus": {"adjudicated_elements": adjudicated}}}
+        # forward-only recall: with retroactive withdrawal the monitors' unseen claims go either way
+        # (tests/test_label_memory.py); this test isolates the consensus outcome
+        cfg = {"recalled_verdicts": "unanimous", "calibration": {"consensus": {"adjudicated_elements": adjudicated}}}
         op = make_operator("comod", cfg, _exhaustive_table(), engine=engine)
         g = SceneGraph(create_nodes=True)
         op.update_many(g, [(ev, FrameLabels(labels)) for ev, labels in _monitor_stream(5)])

@@ -37,7 +37,7 @@ def _streams():
 @given(raw=_streams(), name=st.sampled_from(NAMES), tau_rev=st.sampled_from([0.05, 0.5]),
        strata=st.integers(1, 4), geo=st.sampled_from(["none", "verdict", "label"]),
        consensus=st.sampled_from(["none", "dawid_skene"]), every=st.integers(1, 6),
-       recall=st.sampled_from(["none", "unanimous"]), min_labels=st.integers(1, 2),
+       recall=st.sampled_from(["none", "unanimous", "retroactive"]), min_labels=st.integers(1, 2),
        adjudicated=st.sampled_from(["channel", "consensus"]))
 def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo, consensus, every, recall, min_labels,
                                          adjudicated) -> None:

@@ -1,5 +1,6 @@
 """Recalled verdicts: the channel's earlier labels of an element refuse a claim it does not see
-(``recalled_verdicts: unanimous``, docs/method.md §8): the rule by hand, the memory, the operator."""
+(``recalled_verdicts: unanimous``, docs/method.md §8), and with ``retroactive`` its later labels
+withdraw the claims it committed unseen: the rule by hand, the memory, the operator."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.events import EvidenceEvent
 from sgbelief.fusion.label_memory import LabelMemory
 from sgbelief.fusion.rules import recalled_outcome
-from sgbelief.graph.provenance import EntryStatus
+from sgbelief.graph.provenance import EntryStatus, EntryVerdict
 
 CLASSES = ["bed", "chair", "sofa"]
 
@@ -94,6 +95,9 @@ def test_the_paper_variant_and_cal_do_not_recall() -> None:
     assert make_operator("comod_paper", None, _table()).config.recalled_verdicts == "none"
     assert not make_operator("cal", None, _table()).recalls_verdicts
     assert make_operator("comod", None, _table()).recalls_verdicts
+    assert make_operator("comod", None, _table()).withdraws_unadjudicated  # the default: retroactive
+    assert not make_operator("comod", {"recalled_verdicts": "unanimous"}, _table()).withdraws_unadjudicated
+    assert not make_operator("comod_paper", None, _table()).withdraws_unadjudicated
 
 
 @pytest.mark.parametrize("engine", ["fast", "reference"])
@@ -106,3 +110,120 @@ def test_merged_elements_share_their_labels(engine: str) -> None:
     op.update_many(g, [(EvidenceEvent({"b": 1.0}, "is_bed", 0.8, "det", 1, "e1"), FrameLabels({"b": None}))])
     (e1,) = [e for e in g.provenance.entries("b", "is_bed") if e.event_id == "e1"]
     assert e1.status is EntryStatus.REFUSED
+
+
+# ----------------------------------------------------------------------------- retroactive
+def test_held_predicates_are_judged_once_by_the_elements_labels() -> None:
+    tables = _table().outcome_tables()
+    mem = LabelMemory()
+    mem.hold("v", "is_bed", tables["is_bed"])
+    mem.hold("v", "is_sofa", tables["is_sofa"])
+    mem.add("v", 1, "otherprop")  # decides nothing: both stay held
+    assert mem.judged("v", tables) == ([], [])
+    mem.add("v", 2, "chair")  # denies bed and sofa, unanimously
+    assert mem.judged("v", tables) == (["is_bed", "is_sofa"], [])
+    mem.add("v", 3, "chair")
+    assert mem.judged("v", tables) == ([], [])  # judged once
+    mem.add("v", 4, "bed")  # the channel changed its mind on bed: the withdrawal lapses, once
+    assert mem.judged("v", tables) == ([], ["is_bed"])
+    mem.add("v", 5, "bed")
+    assert mem.judged("v", tables) == ([], [])
+    mem.hold("w", "is_bed", tables["is_bed"])
+    mem.add("w", 1, "bed")  # asserts: released, never withdrawn
+    assert mem.judged("w", tables) == ([], [])
+    mem.add("w", 2, "chair")
+    assert mem.judged("w", tables) == ([], [])
+    mem.hold("w", "is_bed", tables["is_bed"])  # a label already asserts bed: nothing to hold
+    assert mem.judged("w", tables) == ([], [])
+    strict = LabelMemory(min_labels=2)
+    strict.hold("u", "is_bed", tables["is_bed"])
+    strict.add("u", 1, "chair")
+    assert strict.judged("u", tables) == ([], [])  # one denial is not enough yet: still held
+    strict.add("u", 2, "sofa")
+    assert strict.judged("u", tables) == (["is_bed"], [])
+
+
+def _retro_stream(labels_then: list[str | None], rival: bool = False) -> list:
+    """Three 'bed' claims on v unseen (and one 'sofa' with ``rival``), then claims of 'chair' on v
+    with the channel's labels ``labels_then``."""
+    items = [(EvidenceEvent({"v": 1.0}, "is_bed", 0.8, "det", t, f"bed{t}"), FrameLabels({"v": None}))
+             for t in range(3)]
+    if rival:
+        items.append((EvidenceEvent({"v": 1.0}, "is_sofa", 0.8, "det", 3, "sofa3"), FrameLabels({"v": None})))
+    t0 = 4
+    items += [(EvidenceEvent({"v": 1.0}, "is_chair", 0.8, "det", t0 + i, f"chair{i}"), FrameLabels({"v": lab}))
+              for i, lab in enumerate(labels_then)]
+    return items
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_later_unanimous_labels_withdraw_the_claims_committed_unseen(engine: str) -> None:
+    """The regression of issue #30: claims committed while the channel looked away stay committed
+    after the element's labels, all of them, deny the class (the labels came with other classes'
+    claims, so no refusal ever touched the pair)."""
+    plain = {"exclusive_evidence": "none"}  # the chair claims then say nothing of bed
+    on = make_operator("comod", {**plain, "recalled_verdicts": "retroactive"}, _table(), engine=engine)
+    off = make_operator("comod", {**plain, "recalled_verdicts": "unanimous"}, _table(), engine=engine)
+    graphs = []
+    for op in (on, off):
+        g = SceneGraph(create_nodes=True)
+        op.update_many(g, _retro_stream(["chair", "otherprop", "chair"]))
+        graphs.append(g)
+    g_on, g_off = graphs
+    beds = [e for e in g_on.provenance.entries("v", "is_bed") if e.event_id.startswith("bed")]
+    assert len(beds) == 3 and all(e.status is EntryStatus.WITHDRAWN for e in beds)
+    assert on.stats["withdrawn"] == 3 and off.stats["withdrawn"] == 0
+    assert g_on.probability("v", "is_bed") <= 0.5 < g_off.probability("v", "is_bed")  # recall alone leaves them
+    assert g_on.provenance.alpha_beta("v", "is_bed") == pytest.approx((1.0, 1.0))  # nothing else was said of bed
+    # Eq. 4: the belief is the prior plus what is still counted, on every pair
+    for node, pred in g_on.provenance.pairs():
+        assert g_on.provenance.alpha_beta(node, pred) == pytest.approx(g_on.provenance.reconstruct(node, pred))
+    # a withdrawn claim retracts like any other
+    on.retract(g_on, "bed1")
+    assert not g_on.provenance.has_event("bed1")
+    assert g_on.provenance.alpha_beta("v", "is_bed") == pytest.approx((1.0, 1.0))
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_a_withdrawn_claims_evidence_against_its_rivals_goes_with_it(engine: str) -> None:
+    op = make_operator("comod", {"recalled_verdicts": "retroactive"}, _table(), engine=engine)
+    g = SceneGraph(create_nodes=True)
+    op.update_many(g, _retro_stream(["chair"], rival=True))
+    entries = g.provenance.entries("v", "is_bed") + g.provenance.entries("v", "is_sofa")
+    unseen = [e for e in entries if not e.event_id.startswith("chair")]
+    assert any(e.verdict is EntryVerdict.EXCLUSION for e in unseen)  # the sofa claim counted against bed
+    assert all(e.status is EntryStatus.WITHDRAWN for e in unseen)  # gone with the claims
+    # the chair claim, seen and verified, still counts against both
+    assert all(e.status is EntryStatus.COMMITTED for e in entries if e.event_id.startswith("chair"))
+    for pred in ("is_bed", "is_sofa"):
+        assert g.provenance.alpha_beta("v", pred) == pytest.approx(g.provenance.reconstruct("v", pred))
+        assert g.probability("v", pred) < 0.5
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_a_label_that_ever_asserted_the_class_withdraws_nothing(engine: str) -> None:
+    op = make_operator("comod", {"recalled_verdicts": "retroactive"}, _table(), engine=engine)
+    g = SceneGraph(create_nodes=True)
+    op.update_many(g, _retro_stream(["bed", "chair", "chair"]))
+    assert op.stats["withdrawn"] == 0
+    assert all(e.status is EntryStatus.COMMITTED for e in g.provenance.entries("v", "is_bed"))
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_a_withdrawal_lapses_when_a_later_label_asserts_the_class(engine: str) -> None:
+    """The channel denied bed, then said bed: the labels no longer agree, the unseen bed claims count
+    again, exactly as before they were withdrawn."""
+    plain = {"exclusive_evidence": "none"}
+    op = make_operator("comod", {**plain, "recalled_verdicts": "retroactive"}, _table(), engine=engine)
+    fwd = make_operator("comod", {**plain, "recalled_verdicts": "unanimous"}, _table(), engine=engine)
+    g, g_fwd = SceneGraph(create_nodes=True), SceneGraph(create_nodes=True)
+    stream = _retro_stream(["chair", "otherprop", "bed"])
+    op.update_many(g, stream[:5])  # three unseen bed claims, then the chair claim labelled chair
+    assert g.probability("v", "is_bed") <= 0.5 and op.stats["withdrawn"] == 3
+    op.update_many(g, stream[5:])
+    fwd.update_many(g_fwd, stream)
+    assert op.stats["reinstated"] == 3
+    beds = [e for e in g.provenance.entries("v", "is_bed") if e.event_id.startswith("bed")]
+    assert all(e.status is EntryStatus.COMMITTED for e in beds)
+    assert g.provenance.alpha_beta("v", "is_bed") == pytest.approx(g_fwd.provenance.alpha_beta("v", "is_bed"))
+    assert g.provenance.alpha_beta("v", "is_bed") == pytest.approx(g.provenance.reconstruct("v", "is_bed"))

@@ -60,7 +60,7 @@ def test_increment_stance_on_floats_and_arrays(da: float, db: float) -> None:
 
 
 def test_stats_start_at_zero_with_every_key() -> None:
-    assert new_stats() == dict.fromkeys(STAT_KEYS, 0) and len(STAT_KEYS) == 12
+    assert new_stats() == dict.fromkeys(STAT_KEYS, 0) and len(STAT_KEYS) == 14
 
 
 @settings(max_examples=200, deadline=None)

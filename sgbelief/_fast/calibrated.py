@@ -107,6 +107,7 @@ def apply_fused(
     exclusive_with = op.vocabulary.exclusive_with if consensus_classes else None  # type: ignore[union-attr]
     tick = op.tick
     memory = op._label_memory_of(prov) if op.recalls_verdicts else None  # recalled verdicts (fusion.label_memory)
+    withdraws, withdraw_judged = op.withdraws_unadjudicated, op._withdraw_judged  # recalled_verdicts: retroactive
     out: list[QueueResolution] = []
     n_events = n_targets = n_below = n_committed = n_quarantined = n_refused = 0
     try:
@@ -149,8 +150,8 @@ def apply_fused(
                         if lab is not None:
                             if cons is not None:
                                 cons.add_label(node, t, lab)
-                            if memory is not None:
-                                memory.add(node, t, lab)
+                            if memory is not None and memory.add(node, t, lab) and withdraws:
+                                resolutions += withdraw_judged(prov, memory, node, t)
                     continue
                 label = None
                 if label_of is None:
@@ -158,8 +159,8 @@ def apply_fused(
                 else:
                     label = label_of(node) if frame else label_of(node, t)  # type: ignore[call-arg]
                     y = outcome_of.get(label) if label is not None else None  # type: ignore[union-attr]
-                    if memory is not None and label is not None:
-                        memory.add(node, t, label)
+                    if memory is not None and label is not None and memory.add(node, t, label) and withdraws:
+                        resolutions += withdraw_judged(prov, memory, node, t)
                 key = (node, pred)
                 log = pairs_get(key)
                 if n_strata > 1:
@@ -207,6 +208,8 @@ def apply_fused(
                         y_rec = memory.recalled(node, recall_of)  # type: ignore[union-attr]
                         if y_rec is not None and (y_rec == 1) != claim_pos:
                             verdict, code = _CONTRA, _E_CONTRA
+                        elif y_rec is None and withdraws:
+                            memory.hold(node, pred, recall_of)  # type: ignore[union-attr]
                 elif (y == 1) == claim_pos:
                     verdict, code = _CORR, _E_CORR
                 else:
@@ -310,7 +313,7 @@ def apply_fused(
                 for y, sctx in new_outcomes:
                     add(sctx, pred, c, y)
             if resolutions:
-                op._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
+                op._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved", "withdrawn", "reinstated")])
                 out += resolutions
             if report:
                 reports.append(make_report((eid, t, pred, tuple(outcomes), tuple(resolutions))))  # type: ignore[union-attr]

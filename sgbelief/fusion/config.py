@@ -78,11 +78,12 @@ class OperatorConfig(_Frozen):
         "at the same element (rivals: the Dirichlet coupling of docs/method.md §8) or only about its own predicate (none, "
         "the paper)",
     )
-    recalled_verdicts: Literal["none", "unanimous"] = Field(
-        "unanimous",
+    recalled_verdicts: Literal["none", "unanimous", "retroactive"] = Field(
+        "retroactive",
         description="comod: a claim the channel does not adjudicate in its own frame is refused when the labels the "
-        "channel gave its element in earlier frames all contradict it (unanimous, default; docs/method.md §8), or "
-        "only the claim's own frame counts (none, the paper)",
+        "channel gave its element in earlier frames all contradict it (unanimous; docs/method.md §8); retroactive "
+        "(default) also withdraws the claims the element received unadjudicated before its labels, once those all "
+        "contradict them; none: only the claim's own frame counts (the paper)",
     )
     recall_min_labels: int = Field(1, ge=1, description="decisive earlier labels needed before a verdict is recalled")
     verdict_sign: Literal["calibrated", "raw"] = Field(

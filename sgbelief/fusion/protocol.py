@@ -80,7 +80,7 @@ Items = Iterable[tuple["EvidenceEvent", "GeometricChannel | None"]]
 #: ``dismissed``): events applied, targets seen, what happened to them, queue exits, entries compacted
 STAT_KEYS: tuple[str, ...] = (
     "events", "targets", "committed", "refused", "quarantined", "released", "corroborated", "discarded",
-    "resolved", "expired", "below_tau_t", "compacted",
+    "resolved", "expired", "withdrawn", "reinstated", "below_tau_t", "compacted",
 )
 
 

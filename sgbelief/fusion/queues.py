@@ -11,6 +11,12 @@ entries leave them:
 - Q⊥ (refused ⊥ claims): a later T verdict at the same (v, phi) within T_disagree marks it
   resolved, *not* committed; after T_disagree it expires unresolved; an explicit confirmation
   either commits it (human override) or dismisses it.
+
+A committed entry leaves the belief in one more way (``recalled_verdicts: retroactive``,
+docs/method.md §8): a claim committed while the channel had not adjudicated its element is
+withdrawn while every decisive label the element has received contradicts it
+(:func:`withdraw_unadjudicated`), and reinstated when a later label asserts it
+(:func:`reinstate_withdrawn`).
 """
 
 from __future__ import annotations
@@ -21,10 +27,12 @@ from typing import Any
 from sgbelief.errors import QueueError
 from sgbelief.fusion.protocol import QueueResolution
 from sgbelief.graph.entry_log import EntryLog
-from sgbelief.graph.provenance_log import EntryStatus, ProvenanceEntry
+from sgbelief.graph.provenance_log import EntryStatus, EntryVerdict, ProvenanceEntry
 
 _QUARANTINED = EntryStatus.QUARANTINED
 _REFUSED = EntryStatus.REFUSED
+_WITHDRAWN = EntryStatus.WITHDRAWN
+_COMMITTED = EntryStatus.COMMITTED
 
 
 def quarantine_feedback(
@@ -54,6 +62,43 @@ def resolve_disagreements(store: EntryLog, node: Any, predicate: str, t: int) ->
         if entry.status is EntryStatus.REFUSED:
             store.transition(entry, EntryStatus.RESOLVED)
             out.append(QueueResolution(entry.event_id, node, predicate, "resolved", t))
+    return out
+
+
+def withdraw_unadjudicated(store: EntryLog, node: Any, predicate: str, t: int) -> list[QueueResolution]:
+    """Every decisive label of v so far denies phi: the claims for phi at v that were committed
+    while the channel said nothing decisive there (status ``committed``, verdict ∅, stance +1)
+    stop counting (status ``withdrawn``), and so does the evidence each wrote against its rival
+    classes at v (``exclusive_evidence: rivals``, same event). A human's confirmation, a claim
+    released from quarantine at w/k and a compacted bucket are never withdrawn.
+
+    Eq. 4 holds as for any status change: the belief is the prior plus the entries still counted.
+    """
+    out: list[QueueResolution] = []
+    for entry in store.entries(node, predicate):
+        if entry.status is not _COMMITTED or entry.stance != 1 or entry.verdict is not EntryVerdict.NO_CLAIM:
+            continue
+        store.transition(entry, _WITHDRAWN)
+        out.append(QueueResolution(entry.event_id, node, predicate, "withdrawn", t))
+        for other in store.event_entries(entry.event_id):
+            if other.node == node and other.verdict is EntryVerdict.EXCLUSION and other.status is _COMMITTED:
+                store.transition(other, _WITHDRAWN)
+    return out
+
+
+def reinstate_withdrawn(store: EntryLog, node: Any, predicate: str, t: int) -> list[QueueResolution]:
+    """A label of v now asserts phi, so its labels no longer deny it unanimously: the claims
+    :func:`withdraw_unadjudicated` withdrew at (v, phi) count again (status ``committed``), with
+    their evidence against rival classes; exactly the map the withdrawal interrupted."""
+    out: list[QueueResolution] = []
+    for entry in store.entries(node, predicate):
+        if entry.status is not _WITHDRAWN or entry.verdict is not EntryVerdict.NO_CLAIM:
+            continue
+        store.transition(entry, _COMMITTED)
+        out.append(QueueResolution(entry.event_id, node, predicate, "reinstated", t))
+        for other in store.event_entries(entry.event_id):
+            if other.node == node and other.verdict is EntryVerdict.EXCLUSION and other.status is _WITHDRAWN:
+                store.transition(other, _COMMITTED)
     return out
 
 

@@ -33,6 +33,7 @@ class EntryStatus(str, Enum):
     DISCARDED = "discarded"  #: revision disconfirmed within T_cor; never committed
     CONFIRMED = "confirmed"  #: committed by an explicit operator confirmation
     COMPACTED = "compacted"  #: several old entries folded into one equivalent increment
+    WITHDRAWN = "withdrawn"  #: committed while the channel had not adjudicated its element, then contradicted by all its labels; no longer counted
 
 
 #: statuses whose increments count in the belief (Eq. 4)

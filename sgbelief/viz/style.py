@@ -37,6 +37,7 @@ STATUS_COLOURS: dict[str, str] = {
     "resolved": "#ff7f7f",
     "dismissed": "#ff7f7f",
     "compacted": "#333333",
+    "withdrawn": "#c05050",
 }
 #: what each status means, for legends
 STATUS_MEANINGS: dict[str, str] = {
@@ -50,6 +51,7 @@ STATUS_MEANINGS: dict[str, str] = {
     "resolved": "refused, later resolved by a ⊤",
     "dismissed": "refused, dismissed",
     "compacted": "compacted",
+    "withdrawn": "withdrawn: the element's labels, later, all contradicted it",
 }
 #: the refusal family: a ⊥ claim, whether still pending (refused) or closed since
 REFUSED_STATUSES: frozenset[str] = frozenset({"refused", "resolved", "expired", "dismissed"})

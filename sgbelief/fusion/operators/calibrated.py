@@ -145,6 +145,12 @@ class CalibratedOperator(BaseOperator):
         return self.check_compatibility and self.config.recalled_verdicts != "none" and self.vocabulary is not None
 
     @property
+    def withdraws_unadjudicated(self) -> bool:
+        """comod also withdraws the claims an element committed before its labels, once they all
+        contradict them (``recalled_verdicts: retroactive``)."""
+        return self.recalls_verdicts and self.config.recalled_verdicts == "retroactive"
+
+    @property
     def excludes_rivals(self) -> bool:
         """A committed claim also counts against the classes that exclude it (``exclusive_evidence: rivals``)."""
         return self.config.exclusive_evidence == "rivals" and self.vocabulary is not None
@@ -186,8 +192,9 @@ class CalibratedOperator(BaseOperator):
             for node, mass in event.targets.items():
                 label = self._geometric_label(channel, node, event)
                 y = self._outcome(event.predicate, label)
-                if memory is not None and label is not None:
-                    memory.add(node, event.t, label)
+                if memory is not None and label is not None and memory.add(node, event.t, label) \
+                        and self.withdraws_unadjudicated:  # a new label may judge the element's earlier claims
+                    resolutions += self._withdraw_judged(graph.provenance, memory, node, event.t)
                 if mass <= self.config.tau_t:  # discarded; its verdict is only reported
                     tally[Action.BELOW_THRESHOLD] += 1
                     if consensus is not None and label is not None:  # the channel still saw v
@@ -202,6 +209,8 @@ class CalibratedOperator(BaseOperator):
                 if consensus is not None and label is not None:
                     consensus.add_label(node, event.t, label)
                 recalled = memory.recalled(node, recall_table) if recall_table is not None and y is None else None  # type: ignore[union-attr]
+                if recall_table is not None and y is None and recalled is None and self.withdraws_unadjudicated:
+                    memory.hold(node, event.predicate, recall_table)  # type: ignore[union-attr]
                 action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified, label, consensus,
                                                             recalled)
                 resolutions += res
@@ -211,7 +220,7 @@ class CalibratedOperator(BaseOperator):
                              tally[Action.QUARANTINED], tally[Action.REFUSED])
             self._feed_calibration(event, verified)
             if resolutions:
-                self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved")])
+                self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved", "withdrawn", "reinstated")])
                 out += resolutions
             if reports is not None:
                 reports.append(make_report((event.id, event.t, event.predicate, tuple(outcomes), tuple(resolutions))))
@@ -271,6 +280,21 @@ class CalibratedOperator(BaseOperator):
         if self.check_compatibility and v is _CORR:  # later agreement resolves pending ⊥ at (v, phi)
             resolutions += queues.resolve_disagreements(prov, node, pred, event.t)
         return action, v, da, db, resolutions
+
+    def _withdraw_judged(self, prov: EntryLog, memory: LabelMemory, node: Any, t: int) -> list[QueueResolution]:
+        """After a new label of v (:meth:`LabelMemory.judged`): the predicates whose claims at v came
+        while no decisive label had judged them and that v's labels now unanimously deny have those
+        claims withdrawn (:func:`~sgbelief.fusion.queues.withdraw_unadjudicated`); predicates
+        withdrawn earlier that a label now asserts have them reinstated
+        (:func:`~sgbelief.fusion.queues.reinstate_withdrawn`). From a withdrawal on, the recalled
+        verdict refuses such claims as they come, as long as the labels stay unanimous."""
+        denied, reinstated = memory.judged(node, self.vocabulary.outcome_tables())  # type: ignore[union-attr]
+        out: list[QueueResolution] = []
+        for pred in reinstated:
+            out += queues.reinstate_withdrawn(prov, node, pred, t)
+        for pred in denied:
+            out += queues.withdraw_unadjudicated(prov, node, pred, t)
+        return out
 
     def _likelihood_ratio(self, event: EvidenceEvent, context: str, stratum: int, node: Any, mass: float,
                           y: int | None, label: str | None, consensus: MapConsensus | None) -> tuple[float, float]:
