@@ -74,31 +74,29 @@ def withdraw_unadjudicated(store: EntryLog, node: Any, predicate: str, t: int) -
 
     Eq. 4 holds as for any status change: the belief is the prior plus the entries still counted.
     """
-    out: list[QueueResolution] = []
-    for entry in store.entries(node, predicate):
-        if entry.status is not _COMMITTED or entry.stance != 1 or entry.verdict is not EntryVerdict.NO_CLAIM:
-            continue
-        store.transition(entry, _WITHDRAWN)
-        out.append(QueueResolution(entry.event_id, node, predicate, "withdrawn", t))
-        for other in store.event_entries(entry.event_id):
-            if other.node == node and other.verdict is EntryVerdict.EXCLUSION and other.status is _COMMITTED:
-                store.transition(other, _WITHDRAWN)
-    return out
+    return _move_unadjudicated(store, node, predicate, t, _COMMITTED, _WITHDRAWN, "withdrawn")
 
 
 def reinstate_withdrawn(store: EntryLog, node: Any, predicate: str, t: int) -> list[QueueResolution]:
     """A label of v now asserts phi, so its labels no longer deny it unanimously: the claims
     :func:`withdraw_unadjudicated` withdrew at (v, phi) count again (status ``committed``), with
     their evidence against rival classes; exactly the map the withdrawal interrupted."""
+    return _move_unadjudicated(store, node, predicate, t, _WITHDRAWN, _COMMITTED, "reinstated")
+
+
+def _move_unadjudicated(store: EntryLog, node: Any, predicate: str, t: int, old: EntryStatus, new: EntryStatus,
+                        kind: str) -> list[QueueResolution]:
+    """(v, phi)'s unadjudicated asserting claims in status ``old`` move to ``new``, with the
+    exclusion entries their events wrote at v."""
     out: list[QueueResolution] = []
     for entry in store.entries(node, predicate):
-        if entry.status is not _WITHDRAWN or entry.verdict is not EntryVerdict.NO_CLAIM:
+        if entry.status is not old or entry.stance != 1 or entry.verdict is not EntryVerdict.NO_CLAIM:
             continue
-        store.transition(entry, _COMMITTED)
-        out.append(QueueResolution(entry.event_id, node, predicate, "reinstated", t))
+        store.transition(entry, new)
+        out.append(QueueResolution(entry.event_id, node, predicate, kind, t))
         for other in store.event_entries(entry.event_id):
-            if other.node == node and other.verdict is EntryVerdict.EXCLUSION and other.status is _WITHDRAWN:
-                store.transition(other, _COMMITTED)
+            if other.node == node and other.verdict is EntryVerdict.EXCLUSION and other.status is old:
+                store.transition(other, new)
     return out
 
 
