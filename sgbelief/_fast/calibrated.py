@@ -208,7 +208,7 @@ def apply_fused(
                         y_rec = memory.recalled(node, recall_of)  # type: ignore[union-attr]
                         if y_rec is not None and (y_rec == 1) != claim_pos:
                             verdict, code = _CONTRA, _E_CONTRA
-                        elif y_rec is None and withdraws:
+                        elif y_rec is None and withdraws and label_of is not None:  # (no channel: nothing to hold)
                             memory.hold(node, pred, recall_of)  # type: ignore[union-attr]
                 elif (y == 1) == claim_pos:
                     verdict, code = _CORR, _E_CORR

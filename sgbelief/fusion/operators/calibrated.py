@@ -209,7 +209,8 @@ class CalibratedOperator(BaseOperator):
                 if consensus is not None and label is not None:
                     consensus.add_label(node, event.t, label)
                 recalled = memory.recalled(node, recall_table) if recall_table is not None and y is None else None  # type: ignore[union-attr]
-                if recall_table is not None and y is None and recalled is None and self.withdraws_unadjudicated:
+                if recall_table is not None and y is None and recalled is None and channel is not None \
+                        and self.withdraws_unadjudicated:  # (no channel: no label will ever judge it)
                     memory.hold(node, event.predicate, recall_table)  # type: ignore[union-attr]
                 action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified, label, consensus,
                                                             recalled)
