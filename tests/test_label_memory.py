@@ -98,6 +98,10 @@ def test_the_paper_variant_and_cal_do_not_recall() -> None:
     assert make_operator("comod", None, _table()).withdraws_unadjudicated  # the default: retroactive
     assert not make_operator("comod", {"recalled_verdicts": "unanimous"}, _table()).withdraws_unadjudicated
     assert not make_operator("comod_paper", None, _table()).withdraws_unadjudicated
+    # a withdrawal moves the refused pair's belief: such a configuration does not claim Property 2
+    assert not make_operator("comod", {"geometric_evidence": "none"}, _table()).claims_property2
+    assert make_operator("comod", {"geometric_evidence": "none", "recalled_verdicts": "unanimous"},
+                         _table()).claims_property2
 
 
 @pytest.mark.parametrize("engine", ["fast", "reference"])

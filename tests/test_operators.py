@@ -108,7 +108,8 @@ def test_property2_comod_never_commits_a_contradicted_claim(stream, variant) -> 
     that claims it; with ``geometric_evidence: verdict`` (the default) the belief moves only by the
     geometric label's observation, i.e. away from what the refused claim asserts."""
     if variant == "comod_refusal_only":
-        op = make_operator("comod", {"tau_rev": 0.2, "geometric_evidence": "none"}, TABLE)
+        op = make_operator("comod", {"tau_rev": 0.2, "geometric_evidence": "none", "recalled_verdicts": "unanimous"},
+                           TABLE)
     else:
         op = make_operator(variant, {"tau_rev": 0.2}, TABLE)
     assert op.claims_property2 == (variant != "comod")
@@ -126,9 +127,19 @@ def test_property2_comod_never_commits_a_contradicted_claim(stream, variant) -> 
             y = TABLE.outcome(pred, label)
             if op.claims_property2 or y is None:  # (y None: a verdict recalled from earlier labels; no observation)
                 assert after == before
-            else:  # one observation of the geometric outcome (which opposes the refused claim)
+            else:  # one observation of the geometric outcome (which opposes the refused claim), and
+                # with ``recalled_verdicts: retroactive`` the earlier unseen claims the label withdraws
+                # (or, when it asserts the class again, reinstates)
+                want = [1.0, 0.0] if y == 1 else [0.0, 1.0]
+                for r in rep.resolutions:
+                    if r.kind in ("withdrawn", "reinstated") and (r.node, r.predicate) == (node, pred):
+                        sign = -1.0 if r.kind == "withdrawn" else 1.0
+                        for e in g.provenance.event_entries(r.event_id):
+                            if (e.node, e.predicate) == (node, pred):
+                                want[0] += sign * e.d_alpha
+                                want[1] += sign * e.d_beta
                 d = (after[0] - before[0], after[1] - before[1])
-                assert d == pytest.approx((1.0, 0.0) if y == 1 else (0.0, 1.0), abs=1e-9)
+                assert d == pytest.approx(tuple(want), abs=1e-9)
         a, b = g.provenance.alpha_beta(node, pred)
         assert math.isfinite(a) and math.isfinite(b) and a > 0 and b > 0
     # and no refused entry is ever counted, whatever happened later

@@ -159,9 +159,11 @@ class CalibratedOperator(BaseOperator):
     def claims_property2(self) -> bool:
         """Property 2 holds exactly: no ⊥ event changes the belief at its (v, phi). True for a
         refusing operator that does not also observe the geometric label (``comod_paper``,
-        ``geometric_evidence: none``); with ``verdict`` a refused claim's own increments still
-        never enter, but the label's observation (against the claim) does."""
-        return self.check_compatibility and not self.observes_geometry
+        ``geometric_evidence: none``) nor withdraw earlier claims (``recalled_verdicts:
+        retroactive``); with those a refused claim's own increments still never enter, but the
+        label's observation, or the withdrawal of the pair's earlier unseen claims (both against
+        the claim), does."""
+        return self.check_compatibility and not self.observes_geometry and not self.withdraws_unadjudicated
 
     # ------------------------------------------------------------- time
     def _timeouts(self, graph: SceneGraphModel, t: int) -> list[QueueResolution]:
