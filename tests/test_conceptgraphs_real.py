@@ -69,7 +69,7 @@ def _drive(stream):
 def test_real_package_patch_contract_labels_and_restore():
     originals = {n: getattr(cg_utils, n) for n in ("merge_obj2_into_obj1", "merge_objects", "filter_objects")}
     ref = _drive(copy.deepcopy(_stream()))
-    backend = ConceptGraphsBackend("comod", channel=lambda det, node, t: "chair")
+    backend = ConceptGraphsBackend("comod", class_names=["chair", "table"], channel=lambda det, node, t: "chair")
     with backend.patch():
         assert backend.generation == GENERATION
         assert cg_mapping.merge_obj2_into_obj1 is not originals["merge_obj2_into_obj1"]
