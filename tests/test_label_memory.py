@@ -231,3 +231,20 @@ def test_a_withdrawal_lapses_when_a_later_label_asserts_the_class(engine: str) -
     assert all(e.status is EntryStatus.COMMITTED for e in beds)
     assert g.provenance.alpha_beta("v", "is_bed") == pytest.approx(g_fwd.provenance.alpha_beta("v", "is_bed"))
     assert g.provenance.alpha_beta("v", "is_bed") == pytest.approx(g.provenance.reconstruct("v", "is_bed"))
+
+
+@pytest.mark.parametrize("fmt", ["npz", "json"])
+def test_withdrawn_entries_survive_a_save_and_a_load(tmp_path, fmt: str) -> None:
+    op = make_operator("comod", None, _table())
+    g = SceneGraph(create_nodes=True)
+    op.update_many(g, _retro_stream(["chair", "otherprop", "chair"], rival=True))
+    path = g.save(tmp_path / f"g.{fmt}")
+    h = SceneGraph.load(path)
+
+    def statuses(graph):
+        return sorted((e.event_id, e.predicate, e.status.value) for e in graph.provenance.iter_entries())
+
+    assert statuses(h) == statuses(g)
+    assert any(s == "withdrawn" for *_, s in statuses(h))
+    for pred in ("is_bed", "is_sofa", "is_chair"):
+        assert h.provenance.alpha_beta("v", pred) == pytest.approx(g.provenance.alpha_beta("v", pred))
