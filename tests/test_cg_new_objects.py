@@ -195,3 +195,43 @@ def test_uid_lookup_equals_the_try_except_lookup(uids: list) -> None:
     fast, plain = IdentityMap(), IdentityMap()
     assert [fast._uid_node(u) for u in uids] == [_uid_node_plain(plain, u) for u in uids]
     assert fast._uid_nodes == plain._uid_nodes
+
+
+# ---------------------------------------------------------------- the first label of a new object
+
+#: a routed detection: (class, confidence, target nodes, the channel's label or None)
+routed_st = st.tuples(st.integers(0, 2), st.sampled_from([0.2, 0.6, 0.95]),
+                      st.sampled_from([("n0",), ("n1",), ("n0", "n1"), ("n2",)]),
+                      st.one_of(st.none(), st.sampled_from(CLASSES)))
+
+
+@settings(max_examples=150, deadline=None)
+@given(routed=st.lists(routed_st, max_size=6),
+       rule=st.sampled_from(["most_frequent", "first", {"is_chair": "sofa"}, {"is_table": "table"}]),
+       abstain=st.booleans(), merge=st.booleans(), queued=st.booleans())
+def test_one_class_label_equals_the_committed_class(routed: list, rule: Any, abstain: bool, merge: bool,
+                                                    queued: bool) -> None:
+    backend = _backend(label_rule=rule, abstain=abstain,
+                       channel=lambda det, node, t: det.get("geometric_label_for_test"))
+    for n in ("n0", "n1", "n2", "n3"):
+        backend.graph.add_node(n)
+    with backend.batch():
+        for t, (c, conf, nodes, label) in enumerate(routed):
+            det = {"class_id": [c], "conf": [conf], "image_idx": [t], "class_name": [CLASSES[c]]}
+            if label is not None:
+                det["geometric_label_for_test"] = label
+            backend.route_detection(det, {n: 1.0 / len(nodes) + 0.01 * k for k, n in enumerate(nodes)})
+    if merge:
+        backend.flush()
+        backend.operator.merge_nodes(backend.graph, "n2", "n3")  # a node without claims merged in
+    if queued:  # a claim still queued: the general path applies it first
+        backend._batch_open = True
+        backend.route_detection({"class_id": [0], "conf": [0.9], "image_idx": [9]}, {"n0": 1.0})
+    for node in list(backend.graph.nodes()):
+        fast = backend._one_class_label(node)
+        hit = backend.committed_class(node)
+        plain = backend.unknown_label if hit is None else hit[1]
+        if fast is not None:
+            assert fast == plain
+        assert backend.node_label(node) == plain
+    backend._batch_open = False
