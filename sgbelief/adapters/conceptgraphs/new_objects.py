@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections import Counter
 from typing import Any
 
-from sgbelief.adapters.conceptgraphs.claims import EventChannel, read_claims
+from sgbelief.adapters.conceptgraphs.claims import Claim, EventChannel
 from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
 from sgbelief.errors import InvalidEventError
 from sgbelief.fusion.events import EvidenceEvent, next_event_id
@@ -35,7 +35,6 @@ class NewObjectRegistration:
     identity: Any
     tau_t: float
     label_key: str
-    class_names: dict[int, str]
     context: str
     table: Any
     confidence_map: Any
@@ -61,6 +60,9 @@ class NewObjectRegistration:
     def flush(self) -> None:  # pragma: no cover - MapBeliefs defines it
         raise NotImplementedError
 
+    def claims_of(self, obj: Any) -> list[Claim]:  # pragma: no cover - MapBeliefs defines it
+        raise NotImplementedError
+
     def _predicate(self, class_name: str) -> str | None:  # pragma: no cover - MapBeliefs defines it
         raise NotImplementedError
 
@@ -84,7 +86,7 @@ class NewObjectRegistration:
         ``det`` an event on ``node`` alone. Returns the number of events queued."""
         geo = det.pop(self.label_key, None) if isinstance(det, dict) else None
         targets = {node: 1.0}
-        claims = read_claims(det, self.class_names)
+        claims = self.claims_of(det)
         geo_labels = geo if isinstance(geo, list) else None
         names_per_node, preds_per_node = self._names_per_node, self._preds_per_node
         pending, table, context = self._pending, self.table, self.context
