@@ -245,11 +245,12 @@ class LabelReader:
             return None
         ((key, n),) = counts.items()
         (pred,) = preds
-        if n <= 0 or self._predicate(key[1]) != pred:
-            return None
+        # read in committed_class's order: the probability, then (when it commits) the class
         committed = float(self.operator.probability(self.graph, node, pred)) > self.tau
         if not committed and self.abstain:
             return self.unknown_label
+        if n <= 0 or self._predicate(key[1]) != pred:
+            return None
         rule = self.label_rule
         if not isinstance(rule, str) and pred in rule:
             return rule[pred]
