@@ -114,6 +114,7 @@ PARTS = [
     ("channel: label-image look-up", "sgbelief.fusion.channel:LabelImageChannel", "label_detection"),
     ("per-claim notes after the update (counts, label predicates)", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "flush"),
     ("routing: claims -> queued events", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "route_detection"),
+    ("routing: claims -> queued events", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "_route_own"),
     ("identity: look-up, registration, new graph nodes", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "ensure_node"),
     ("targeting: candidates of a score row", "sgbelief.adapters.conceptgraphs.map_beliefs:MapBeliefs", "targets_for"),
     ("geometry summaries (centroid, box)", "sgbelief.adapters.conceptgraphs.geometry", "geometry_summary"),
@@ -169,9 +170,9 @@ def _install_breakdown(bd: Breakdown) -> None:
         mod = sys.modules.get(modname) or importlib.import_module(modname)
         owner = getattr(mod, cls) if cls else mod
         bd.wrap(owner, name, label)
-        if not cls and modname.endswith("geometry"):  # the module-level name map_beliefs bound
-            mb = importlib.import_module("sgbelief.adapters.conceptgraphs.map_beliefs")
-            bd.wrap(mb, name, label)
+        if not cls and modname.endswith("geometry"):  # the module-level names the backend's modules bound
+            for bound in ("map_beliefs", "new_objects"):
+                bd.wrap(importlib.import_module(f"sgbelief.adapters.conceptgraphs.{bound}"), name, label)
 
 
 def run(n_obj: int, n_dets: int, frames: int, channel: str, profiler: Any = None,

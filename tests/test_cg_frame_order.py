@@ -171,10 +171,16 @@ def _track_queued_dicts(backend: ConceptGraphsBackend) -> None:
     """The bookkeeping the interleaved loops relied on: ``backend.queued_dicts`` holds the ids of
     the dicts whose claims are queued (their channels read them when the queue is applied)."""
     queued: set[int] = set()
-    route, flush = backend.route_detection, backend.flush
+    route, route_own, flush = backend.route_detection, backend._route_own, backend.flush
 
     def routed(det: dict, targets: Any) -> int:
         n = route(det, targets)
+        if n and backend._pending:
+            queued.add(id(det))
+        return n
+
+    def routed_own(det: dict, node: Any) -> int:  # a new object's own claims (the registration's path)
+        n = route_own(det, node)
         if n and backend._pending:
             queued.add(id(det))
         return n
@@ -185,6 +191,7 @@ def _track_queued_dicts(backend: ConceptGraphsBackend) -> None:
 
     backend.queued_dicts = queued  # type: ignore[attr-defined]
     backend.route_detection = routed  # type: ignore[method-assign]
+    backend._route_own = routed_own  # type: ignore[method-assign]
     backend.flush = flushed  # type: ignore[method-assign]
 
 
@@ -265,13 +272,18 @@ def test_routing_the_frame_before_its_merges_equals_routing_each_detection_befor
 def test_a_frame_routes_every_detection_before_the_first_merge() -> None:
     backend = ConceptGraphsBackend("comod", context="t", class_names=CLASSES, print_summary=False)
     order: list = []
-    route = backend.route_detection
+    route, route_own = backend.route_detection, backend._route_own
 
     def routed(det: dict, targets: Any) -> int:
         order.append(("route", det["mask_idx"][0]))
         return route(det, targets)
 
+    def routed_own(det: dict, node: Any) -> int:  # a new object's own claims
+        order.append(("route", det["mask_idx"][0]))
+        return route_own(det, node)
+
     backend.route_detection = routed  # type: ignore[method-assign]
+    backend._route_own = routed_own  # type: ignore[method-assign]
     f = MainGeneration(backend, {"merge_obj2_into_obj1": lambda cfg, a, b, run_dbscan=True:
                                  order.append(("merge", b["mask_idx"][0])) or a})
     objects = [_det(k, 0, 0, 0.8, None, False) for k in range(2)]

@@ -23,6 +23,15 @@ NodeId = str | int
 
 
 def _as_point(value: Any, name: str) -> tuple[float, float, float]:
+    """``value`` as a point: a tuple of 3 Python floats (ValueError otherwise)."""
+    if type(value) is tuple and len(value) == 3 and type(value[0]) is float and type(value[1]) is float \
+            and type(value[2]) is float:
+        return value  # already one (a ConceptGraphs geometry summary): float() would give the same floats
+    return _as_point_plain(value, name)
+
+
+def _as_point_plain(value: Any, name: str) -> tuple[float, float, float]:
+    """:func:`_as_point` of any value (each coordinate through ``float``)."""
     try:
         pt = tuple(map(float, value))
     except TypeError as exc:

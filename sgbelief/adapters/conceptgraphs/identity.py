@@ -64,12 +64,12 @@ class IdentityMap:
 
     def _uid_node(self, uid: Any) -> str:
         try:
-            return self._uid_nodes[uid]
-        except KeyError:
-            node = self._uid_nodes[uid] = str(uid)
-            return node
+            node = self._uid_nodes.get(uid)  # a miss (every new object's) raises no KeyError to catch
         except TypeError:  # an unhashable id: its string
             return str(uid)
+        if node is None:
+            node = self._uid_nodes[uid] = str(uid)
+        return node
 
     def lookup(self, obj: dict) -> str | None:
         """Node registered for ``obj`` (resolving tombstones is left to :meth:`resolve`)."""

@@ -38,6 +38,9 @@ class LabelReader:
     abstain: bool
     labels: Any
     _names_per_node: dict[Any, Counter[tuple[int | None, str]]]
+    _preds_per_node: dict[Any, set[str]]
+    _pending: list[Any]
+    _external_graph: bool
     _label_preds_per_node: dict[Any, set[str]]
     _labels_per_node: dict[Any, Counter[str]]
     _claim_counts: dict[str, Any]
@@ -222,8 +225,36 @@ class LabelReader:
 
     def node_label(self, node: Any) -> str:
         """The class name the beliefs give graph node ``node`` (``unknown_label`` when nothing commits)."""
+        label = self._one_class_label(node)  # a node claimed as one class only: most new objects
+        if label is not None:
+            return label
         hit = self.committed_class(node)
         return self.unknown_label if hit is None else hit[1]
+
+    def _one_class_label(self, node: Any) -> str | None:
+        """:meth:`node_label` of a node whose claims all named one class and that no geometric
+        label reached (each new object's first label on ``ali-dev``), or None for any other node.
+
+        Then the candidates are that class's predicate alone: it is the label when it commits
+        (always, without ``abstain``), else ``unknown_label``; under a ``label_rule`` mapping that
+        names the predicate, the mapped name. No ranking and no scan of the claimed names."""
+        counts = self._names_per_node.get(node)
+        preds = self._preds_per_node.get(node)
+        if (counts is None or len(counts) != 1 or preds is None or len(preds) != 1 or self._pending
+                or self._external_graph or self._label_preds_per_node.get(node) or self._labels_per_node.get(node)):
+            return None
+        ((key, n),) = counts.items()
+        (pred,) = preds
+        # read in committed_class's order: the probability, then (when it commits) the class
+        committed = float(self.operator.probability(self.graph, node, pred)) > self.tau
+        if not committed and self.abstain:
+            return self.unknown_label
+        if n <= 0 or self._predicate(key[1]) != pred:
+            return None
+        rule = self.label_rule
+        if not isinstance(rule, str) and pred in rule:
+            return rule[pred]
+        return key[1]
 
     def label_of(self, obj: Mapping[str, Any]) -> str | None:
         """Class name from the beliefs (``unknown_label`` when nothing commits; None if unseen)."""

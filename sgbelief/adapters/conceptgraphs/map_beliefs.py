@@ -22,6 +22,7 @@ from sgbelief.adapters.conceptgraphs.claims import (
 from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
 from sgbelief.adapters.conceptgraphs.identity import IdentityMap
 from sgbelief.adapters.conceptgraphs.labels_out import LabelReader
+from sgbelief.adapters.conceptgraphs.new_objects import NewObjectRegistration, _checked_confidence
 from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClaimCounts
 from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
 from sgbelief.errors import InvalidEventError
@@ -29,7 +30,7 @@ from sgbelief.fusion.events import EvidenceEvent, next_event_id
 
 __all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "DetectionLabelFn", "MapBeliefs"]
 
-class MapBeliefs(LabelReader):
+class MapBeliefs(NewObjectRegistration, LabelReader):
     """The belief side of a ConceptGraphs map: which graph node each map object is, the evidence its
     detections routed there, and the label the beliefs give it.
 
@@ -226,10 +227,7 @@ class MapBeliefs(LabelReader):
                 return identity.resolve(node)
             if node in self.graph:
                 return node
-        node = identity.register(obj, fp)  # the fingerprint find computed, not a second one
-        self._add_graph_node(node, obj)
-        self.route_detection(obj, {node: 1.0})
-        return node
+        return self._register_new(obj, fp)  # the fingerprint find computed, not a second one
 
     @contextlib.contextmanager
     def frame_lookups(self) -> Iterator[None]:
@@ -257,13 +255,6 @@ class MapBeliefs(LabelReader):
         node = self.ensure_node(obj)
         memo[id(obj)] = (obj, node)
         return node
-
-    def _add_graph_node(self, node: Any, obj: Mapping[str, Any]) -> None:
-        if node in self.graph:
-            return
-        centroid, bbox = geometry_summary(obj)
-        self.graph.add_node(node, centroid=centroid, bbox=bbox, source="conceptgraphs")
-        self.fresh_geometry.add(id(obj))
 
     # ------------------------------------------------------------------ evidence
     def route_detection(self, det: dict, targets: Mapping[Any, float]) -> int:
@@ -566,11 +557,3 @@ class MapBeliefs(LabelReader):
     def routed_detections(self) -> int:
         """Per-detection claims routed so far (each detection counted once)."""
         return self._routed_detections
-
-
-def _checked_confidence(value: Any) -> float:
-    """A ``confidence_map`` result as an event confidence: a finite number in [0, 1]."""
-    c = float(value)
-    if not 0.0 <= c <= 1.0:  # also rejects NaN
-        raise InvalidEventError("confidence", f"confidence_map gave {value!r}: must be finite and in [0, 1]")
-    return c
