@@ -16,17 +16,14 @@ from sgbelief.adapters.conceptgraphs.claims import (
     DEFAULT_LABEL_KEY,
     Claim,
     DetectionLabelFn,
-    EventChannel,
     read_claims,
 )
 from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
 from sgbelief.adapters.conceptgraphs.identity import IdentityMap
 from sgbelief.adapters.conceptgraphs.labels_out import LabelReader
-from sgbelief.adapters.conceptgraphs.new_objects import NewObjectRegistration, _checked_confidence
+from sgbelief.adapters.conceptgraphs.new_objects import NewObjectRegistration
 from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClaimCounts
 from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
-from sgbelief.errors import InvalidEventError
-from sgbelief.fusion.events import EvidenceEvent, next_event_id
 
 __all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "DetectionLabelFn", "MapBeliefs"]
 
@@ -273,9 +270,6 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
         geo_labels = geo if isinstance(geo, list) else None
         names_per_node = self._names_per_node
         preds_per_node = self._preds_per_node
-        pending = self._pending
-        table = self.table
-        context = self.context
         n_events = 0
         for k, claim in enumerate(claims):
             name = claim.class_name
@@ -294,24 +288,9 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
                         preds.add(pred)
             if pred is None or not targets:
                 continue
-            conf = claim.confidence
-            if self.confidence_map is not None:
-                conf = _checked_confidence(self.confidence_map(conf))
-            label = geo if geo_labels is None else (geo_labels[k] if k < len(geo_labels) else None)
-            if label is not None:
-                self._has_channel = True
-            if table is not None and pred not in table:
-                channel: Any = self._null  # no verification possible for this predicate
-            else:
-                channel = EventChannel(label, det, self.channel, self.channel_fn, k, self.labels.resolve)
-            if claim.t < 0:
-                raise InvalidEventError("t", f"must be a non-negative integer time step, got {claim.t!r}")
-            if not 0.0 <= conf <= 1.0:  # NaN
-                raise InvalidEventError("confidence", f"must be finite and in [0, 1], got {conf!r}")
             # the event is built from checked parts (targets above tau_T, masses from a normalised
             # row, a clipped confidence): no re-validation per claim
-            pending.append((EvidenceEvent.trusted(targets, pred, conf, context, claim.t, next_event_id()),
-                            channel, name))
+            self._queue_claim(det, k, claim, pred, targets, geo, geo_labels)
             n_events += 1
         changed = self._changed
         for node in targets:

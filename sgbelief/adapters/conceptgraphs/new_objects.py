@@ -89,7 +89,6 @@ class NewObjectRegistration:
         claims = self.claims_of(det)
         geo_labels = geo if isinstance(geo, list) else None
         names_per_node, preds_per_node = self._names_per_node, self._preds_per_node
-        pending, table, context = self._pending, self.table, self.context
         counts = names_per_node.get(node)
         n_events = 0
         for k, claim in enumerate(claims):
@@ -106,22 +105,7 @@ class NewObjectRegistration:
                 preds_per_node[node] = {pred}
             else:
                 preds.add(pred)
-            conf = claim.confidence
-            if self.confidence_map is not None:
-                conf = _checked_confidence(self.confidence_map(conf))
-            label = geo if geo_labels is None else (geo_labels[k] if k < len(geo_labels) else None)
-            if label is not None:
-                self._has_channel = True
-            if table is not None and pred not in table:
-                channel: Any = self._null  # no verification possible for this predicate
-            else:
-                channel = EventChannel(label, det, self.channel, self.channel_fn, k, self.labels.resolve)
-            if claim.t < 0:
-                raise InvalidEventError("t", f"must be a non-negative integer time step, got {claim.t!r}")
-            if not 0.0 <= conf <= 1.0:  # NaN
-                raise InvalidEventError("confidence", f"must be finite and in [0, 1], got {conf!r}")
-            pending.append((EvidenceEvent.trusted(targets, pred, conf, context, claim.t, next_event_id()),
-                            channel, name))
+            self._queue_claim(det, k, claim, pred, targets, geo, geo_labels)
             n_events += 1
         per_node = self._detections_per_node
         per_node[node] = per_node.get(node, 0) + len(claims)
@@ -130,6 +114,29 @@ class NewObjectRegistration:
         if not (self._batch_open and self._skip_reports and not self.keep_reports):  # not self._batched
             self.flush()
         return n_events
+
+    def _queue_claim(self, det: dict, k: int, claim: Claim, pred: str, targets: dict[Any, float], geo: Any,
+                     geo_labels: list[Any] | None) -> None:
+        """Queue claim ``k`` of ``det`` (predicate ``pred``) as one event on ``targets``, with its
+        channel: the per-claim half that :meth:`MapBeliefs.route_detection` and :meth:`_route_own`
+        share. Raises InvalidEventError for a negative time or a confidence outside [0, 1]."""
+        conf = claim.confidence
+        if self.confidence_map is not None:
+            conf = _checked_confidence(self.confidence_map(conf))
+        label = geo if geo_labels is None else (geo_labels[k] if k < len(geo_labels) else None)
+        if label is not None:
+            self._has_channel = True
+        table = self.table
+        if table is not None and pred not in table:
+            channel: Any = self._null  # no verification possible for this predicate
+        else:
+            channel = EventChannel(label, det, self.channel, self.channel_fn, k, self.labels.resolve)
+        if claim.t < 0:
+            raise InvalidEventError("t", f"must be a non-negative integer time step, got {claim.t!r}")
+        if not 0.0 <= conf <= 1.0:  # NaN
+            raise InvalidEventError("confidence", f"must be finite and in [0, 1], got {conf!r}")
+        self._pending.append((EvidenceEvent.trusted(targets, pred, conf, self.context, claim.t, next_event_id()),
+                              channel, claim.class_name))
 
 
 def _checked_confidence(value: Any) -> float:
