@@ -29,6 +29,13 @@ class ConsensusConfig(BaseModel):
     bins: int = Field(4, ge=1, description="confidence bins per context (by rank) for the Dawid-Skene workers")
     smoothing: float = Field(0.5, ge=0.0, description="Dirichlet pseudo-count of the Dawid-Skene M-step")
     n_iter: int = Field(50, ge=1, description="EM iterations at most per refit")
+    emission: Literal["multinomial", "dirichlet_multinomial"] = Field(
+        "dirichlet_multinomial",
+        description="how a source's observations of one element are modelled: independent given its class "
+        "(multinomial, Dawid-Skene) or correlated, Dirichlet-multinomial around the source's confusion row with a "
+        "concentration learned from the map (dirichlet_multinomial, default: a detector that mistakes an object "
+        "keeps mistaking it; docs/method.md §8)",
+    )
     adjudicated_elements: Literal["channel", "consensus"] = Field(
         "channel",
         description="outcome of a silent claim on an element the channel labelled decisively at other times: the "

@@ -22,6 +22,27 @@ Two differences from the textbook model, both optional:
   like any other: claims on such elements are few, scattered over classes, and low in confidence.
 * ``weights``: an observation may count fractionally (a claim's targeting mass T(v)).
 
+One extension, ``emission="dirichlet_multinomial"``: the textbook model takes every observation
+of a task as independent given its class, so ten claims of ``bed`` on one object are ten times
+the evidence of one. A detector that mistakes an object for a bed does so again in the next frame
+(and a segmenter that mislabels an object keeps mislabelling it), so its errors on one task are
+correlated. With this emission the counts n_vw (labels worker w gave task v) are
+Dirichlet-multinomial around the worker's confusion row, with a per-worker concentration s_w::
+
+    P(n_vw | z_v = z) = DM(n_vw | s_w theta_w[z])                                  (overdispersed emission)
+    log q_v(z) = log pi_z + sum_{w, l: n_vwl > 0} [lnG(n_vwl + s_w theta_w[z, l]) - lnG(s_w theta_w[z, l])] + c_v
+
+(:func:`dirichlet_multinomial_cells`; c_v does not depend on z). s_w -> inf is the independent
+model (the bracket tends to n log(s theta), whose log s part is the same for every z); a small s_w
+makes an object's repeated labels count little more than its distinct ones. theta and pi keep the
+closed-form M-step above (the Dirichlet's mean), and from the second iteration on (the first
+posterior is the initial vote, not a fitted model's, so the first step is the independent model's)
+each s_w is the value of :data:`CONCENTRATIONS` that maximises the expected complete-data
+log-likelihood
+Q_w(s) = sum_v [sum_z q_v(z) sum_l (lnG(n_vwl + s theta) - lnG(s theta)) + lnG(s) - lnG(s + N_vw)]
+(:func:`dirichlet_multinomial_log_likelihood`), so the correlation is learned from the map like the
+confusions: how much more an object's labels agree with each other than the confusion rows explain.
+
 The estimator has crowd-kit's shape (``fit`` on a long table, fitted state with a trailing
 underscore: ``priors_``, ``errors_``, ``probas_``); with ``none_class=False``, ``smoothing=0``
 and majority-vote initialisation it is crowd-kit's ``DawidSkene`` (``tests/test_dawid_skene.py``
@@ -32,17 +53,52 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import sparse
+from scipy.special import gammaln
 
-__all__ = ["DawidSkene", "NONE_CLASS"]
+__all__ = ["CONCENTRATIONS", "DawidSkene", "NONE_CLASS", "dirichlet_multinomial_cells",
+           "dirichlet_multinomial_log_likelihood"]
 
 #: the name of the latent class "none of the claimed classes"
 NONE_CLASS = "<none>"
 
 _EPS = 1e-12
+
+#: the concentrations a worker's Dirichlet is chosen among (``emission="dirichlet_multinomial"``),
+#: largest first so that a tie keeps the independent model (inf)
+CONCENTRATIONS = (np.inf, 256.0, 128.0, 64.0, 32.0, 16.0, 8.0, 4.0, 2.0, 1.0, 0.5)
+
+
+def dirichlet_multinomial_cells(n: NDArray[np.float64], s: NDArray[np.float64] | float,
+                                theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A task's evidence for each class from its count n of one (worker, label) cell:
+    lnG(n + s theta) - lnG(s theta) (the overdispersed emission's E-step term, module docstring);
+    n log theta where s is infinite (the independent model, Dawid–Skene's term). ``n``: (cells,),
+    ``s``: scalar or (cells,), ``theta``: (cells, classes), the cell's confusion entry per class."""
+    n = np.asarray(n, dtype=np.float64)[:, None]
+    s_col = np.broadcast_to(np.asarray(s, dtype=np.float64), n.shape[:1])[:, None]
+    finite = np.isfinite(s_col[:, 0])
+    out = n * np.log(theta)
+    if finite.any():
+        a = s_col[finite] * theta[finite]
+        out[finite] = gammaln(n[finite] + a) - gammaln(a)
+    return out
+
+
+def dirichlet_multinomial_log_likelihood(cells: NDArray[np.float64], totals: NDArray[np.float64],
+                                         s: float) -> NDArray[np.float64]:
+    """log DM(n | s theta) of groups, from their cells' terms :func:`dirichlet_multinomial_cells`
+    summed per group (``cells``) and the groups' totals N = sum_l n_l (``totals``):
+    sum_l [lnG(n_l + s theta_l) - lnG(s theta_l)] + lnG(s) - lnG(s + N), without the multinomial
+    coefficient (it depends on neither s nor theta). With s infinite it is sum_l n_l log theta_l,
+    the multinomial's log-likelihood, its limit."""
+    if not np.isfinite(s):
+        return np.asarray(cells, dtype=np.float64)
+    return np.asarray(cells, dtype=np.float64) + (gammaln(s) - gammaln(s + np.asarray(totals, dtype=np.float64)))
 
 
 @dataclass
@@ -63,6 +119,12 @@ class DawidSkene:
         Initialisation only: the "none" class starts with this many votes on every element (the
         claims' weights vote for their classes), so an element with one weak claim starts mostly
         "none" and one with many agreeing claims starts mostly that class.
+    emission : {"multinomial", "dirichlet_multinomial"}
+        Every observation independent given the task's class (Dawid–Skene), or a worker's labels
+        of one task correlated, with a concentration per worker learned among ``concentrations``
+        (module docstring).
+    concentrations : tuple of float
+        The values s_w is chosen among; ``inf`` is the independent model.
     """
 
     n_iter: int = 50
@@ -70,6 +132,8 @@ class DawidSkene:
     smoothing: float = 0.5
     none_class: bool = True
     none_prior_votes: float = 1.0
+    emission: Literal["multinomial", "dirichlet_multinomial"] = "multinomial"
+    concentrations: tuple[float, ...] = CONCENTRATIONS
 
     # fitted state
     classes_: list[str] | None = None
@@ -78,6 +142,7 @@ class DawidSkene:
     priors_: NDArray[np.float64] | None = None
     errors_: NDArray[np.float64] | None = None  # (workers, classes, labels)
     probas_: NDArray[np.float64] | None = None  # (tasks, classes)
+    concentrations_: NDArray[np.float64] | None = None  # (workers,): s_w, inf for the independent model
     n_iter_: int = 0
 
     def fit(
@@ -146,11 +211,18 @@ class DawidSkene:
         # steps are then one sparse product each
         cells = sparse.csr_matrix((w, (t, np.asarray(workers, dtype=np.intp) * n_labels + labels)),
                                   shape=(n_t, n_workers * n_labels))
+        groups = _Groups(cells, n_workers, n_labels) if self.emission == "dirichlet_multinomial" else None
+        conc = np.full(n_workers, np.inf)
         theta = pi = None
         it = 0
         for it in range(1, self.n_iter + 1):
             theta, pi = self._m_step(q, cells, n_workers, n_labels)
-            q_new = self._e_step(theta, pi, cells)
+            if groups is None:
+                q_new = self._e_step(theta, pi, cells)
+            else:
+                if it > 1:  # the first posterior is the initial vote, not a fitted model's: one independent step first
+                    conc = groups.concentrations(theta, q, self.concentrations)
+                q_new = groups.e_step(theta, pi, conc)
             delta = float(np.max(np.abs(q_new - q))) if n_t else 0.0
             q = q_new
             if delta <= self.tol:
@@ -158,6 +230,7 @@ class DawidSkene:
         if theta is None:  # n_iter == 0: the initial vote
             theta, pi = self._m_step(q, cells, n_workers, n_labels)
         self.priors_, self.errors_, self.probas_, self.n_iter_ = pi, theta, q, it
+        self.concentrations_ = conc
         return self
 
     def _m_step(self, q: NDArray[np.float64], cells: sparse.csr_matrix, n_w: int,
@@ -186,3 +259,58 @@ class DawidSkene:
         """Index of a latent class in ``classes_`` (ValueError if unknown)."""
         assert self.classes_ is not None, "fit first"
         return self.classes_.index(name)
+
+
+class _Groups:
+    """The observations as (task, worker, label) cells with their counts, for the overdispersed
+    emission: the per-cell terms, their sums per task (E-step) and per worker (the choice of s_w)."""
+
+    def __init__(self, cells: sparse.csr_matrix, n_workers: int, n_labels: int) -> None:
+        cells = cells.copy()
+        cells.sum_duplicates()
+        cells.eliminate_zeros()
+        self.n_tasks, self.n_workers, self.n_labels = cells.shape[0], n_workers, n_labels
+        self.col = cells.indices.astype(np.intp)
+        self.count = cells.data.astype(np.float64)
+        self.task = np.repeat(np.arange(self.n_tasks, dtype=np.intp), np.diff(cells.indptr))
+        self.worker = self.col // n_labels
+        # cells -> their task: one sparse product sums a cell term per task
+        nnz = len(self.count)
+        self.by_task = sparse.csr_matrix((np.ones(nnz), np.arange(nnz), cells.indptr), shape=(self.n_tasks, nnz))
+        # the (task, worker) groups: each cell's group, the groups' totals N_vw and workers
+        group, self.cell_group = np.unique(self.task * n_workers + self.worker, return_inverse=True)
+        self.totals = np.bincount(self.cell_group, weights=self.count)
+        self.group_worker = (group % n_workers).astype(np.intp)
+
+    def _theta(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(cells, classes): each cell's confusion entry per class."""
+        n_w, k, n_l = theta.shape
+        return theta.transpose(0, 2, 1).reshape(n_w * n_l, k)[self.col]
+
+    def e_step(self, theta: NDArray[np.float64], pi: NDArray[np.float64],
+               conc: NDArray[np.float64]) -> NDArray[np.float64]:
+        """log q_v(z) = log pi_z + sum of the task's cell terms (module docstring), normalised per v."""
+        terms = dirichlet_multinomial_cells(self.count, conc[self.worker], self._theta(theta))
+        log_lik = np.asarray(self.by_task @ terms) + np.log(pi)
+        log_lik -= log_lik.max(axis=1, keepdims=True)
+        q = np.exp(log_lik)
+        return q / q.sum(axis=1, keepdims=True)
+
+    def concentrations(self, theta: NDArray[np.float64], q: NDArray[np.float64],
+                       grid: tuple[float, ...]) -> NDArray[np.float64]:
+        """Per worker, the s in ``grid`` of largest Q_w(s) (the first on a tie)."""
+        th = self._theta(theta)
+        qc = q[self.task]  # (cells, classes): the posterior of each cell's task
+        n_groups = len(self.totals)
+        best = out = None
+        for s in grid:
+            per_cell = (qc * dirichlet_multinomial_cells(self.count, s, th)).sum(axis=1)
+            per_group = dirichlet_multinomial_log_likelihood(
+                np.bincount(self.cell_group, weights=per_cell, minlength=n_groups), self.totals, s)
+            q_w = np.bincount(self.group_worker, weights=per_group, minlength=self.n_workers)
+            if best is None:
+                best, out = q_w, np.full(self.n_workers, s)
+                continue
+            better = q_w > best + 1e-9 * np.abs(best)
+            out[better], best[better] = s, q_w[better]
+        return out if out is not None else np.full(self.n_workers, np.inf)

@@ -115,7 +115,7 @@ class MapConsensus:
         #: predicate -> {label: y}: the channel's verdicts (the vocabulary's outcome tables); with
         #: ``adjudicated_elements: channel`` a unanimous verdict is a silent claim's outcome
         self.outcomes = outcomes if cc.adjudicated_elements == "channel" else None
-        self._ds = DawidSkene(n_iter=cc.n_iter, smoothing=cc.smoothing, none_class=True)
+        self._ds = DawidSkene(n_iter=cc.n_iter, smoothing=cc.smoothing, none_class=True, emission=cc.emission)
         self.calibration = ConsensusCalibration(config.target_size, config.kappa_min, config.lr_max, config.cold_start)
         # codes of elements (the Dawid-Skene tasks), classes, contexts, cells and channel labels
         self._tasks, self._classes, self._contexts, self._cells, self._labels = (_Codes() for _ in range(5))
