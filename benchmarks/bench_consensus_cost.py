@@ -24,6 +24,7 @@ CONFIGS = {
     "default, recalled verdicts forward only": {"recalled_verdicts": "unanimous"},
     "default, no recalled verdicts": {"recalled_verdicts": "none"},
     "default, posterior outcomes only": {"calibration": {"consensus": {"adjudicated_elements": "consensus"}}},
+    "default, independent emission (Dawid-Skene's)": {"calibration": {"consensus": {"emission": "multinomial"}}},
     "consensus only": {"exclusive_evidence": "none"},
     "rivals only": {"calibration": {"consensus": {"method": "none"}}},
     "neither": {"exclusive_evidence": "none", "calibration": {"consensus": {"method": "none"}}},

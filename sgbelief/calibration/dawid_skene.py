@@ -35,13 +35,14 @@ Dirichlet-multinomial around the worker's confusion row, with a per-worker conce
 (:func:`dirichlet_multinomial_cells`; c_v does not depend on z). s_w -> inf is the independent
 model (the bracket tends to n log(s theta), whose log s part is the same for every z); a small s_w
 makes an object's repeated labels count little more than its distinct ones. theta and pi keep the
-closed-form M-step above (the Dirichlet's mean), and from the second iteration on (the first
-posterior is the initial vote, not a fitted model's, so the first step is the independent model's)
-each s_w is the value of :data:`CONCENTRATIONS` that maximises the expected complete-data
-log-likelihood
+closed-form M-step above (the Dirichlet's mean). At iterations 2, 4, 8, 16, ... each s_w becomes
+the value of :data:`CONCENTRATIONS` that maximises the expected complete-data log-likelihood
 Q_w(s) = sum_v [sum_z q_v(z) sum_l (lnG(n_vwl + s theta) - lnG(s theta)) + lnG(s) - lnG(s + N_vw)]
 (:func:`dirichlet_multinomial_log_likelihood`), so the correlation is learned from the map like the
 confusions: how much more an object's labels agree with each other than the confusion rows explain.
+The first iteration is the independent model's (its posterior is the initial vote, not a fitted
+model's, and s chosen on it is far from the fitted one); the choice is not repeated every iteration
+because it evaluates every cell once per grid value and s settles at once (docs/performance.md).
 
 The estimator has crowd-kit's shape (``fit`` on a long table, fitted state with a trailing
 underscore: ``priors_``, ``errors_``, ``probas_``); with ``none_class=False``, ``smoothing=0``
@@ -220,7 +221,7 @@ class DawidSkene:
             if groups is None:
                 q_new = self._e_step(theta, pi, cells)
             else:
-                if it > 1:  # the first posterior is the initial vote, not a fitted model's: one independent step first
+                if it >= 2 and it & (it - 1) == 0:  # iterations 2, 4, 8, 16, ... (module docstring)
                     conc = groups.concentrations(theta, q, self.concentrations)
                 q_new = groups.e_step(theta, pi, conc)
             delta = float(np.max(np.abs(q_new - q))) if n_t else 0.0
