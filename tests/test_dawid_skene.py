@@ -230,3 +230,14 @@ def test_correlated_errors_are_learned_and_the_posterior_is_honest(seed: int) ->
     acc = lambda ds: float((ds.probas_.argmax(1) == z).mean())  # noqa: E731
     assert acc(dm) == pytest.approx(acc(plain), abs=0.01)
     assert log_loss(dm) == pytest.approx(log_loss(plain), abs=0.005)
+
+
+def test_an_independent_worker_keeps_the_multinomial_emission() -> None:
+    """A worker named in ``independent_workers`` keeps s = inf even when its labels are correlated;
+    the others still learn theirs (seeded; the same stream as above)."""
+    classes, _, tasks, workers, labels = _correlated_stream(0, s_true=2.0)
+    ds = DawidSkene(none_class=False, emission="dirichlet_multinomial").fit(
+        tasks, workers, labels, classes=classes, independent_workers=["det"])
+    assert np.isinf(ds.concentrations_[ds.workers_.index("det")])
+    plain = DawidSkene(none_class=False).fit(tasks, workers, labels, classes=classes)
+    np.testing.assert_allclose(ds.probas_, plain.probas_, atol=1e-10)  # "ref" labels once: nothing to learn

@@ -52,7 +52,7 @@ checks that on a seeded stream).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -158,6 +158,7 @@ class DawidSkene:
         votes: Sequence[float] | NDArray[np.float64] | None = None,
         vote_classes: Sequence[str | None] | None = None,
         none_votes: Sequence[float] | NDArray[np.float64] | None = None,
+        independent_workers: Collection[str] = (),
     ) -> DawidSkene:
         """Fit on a long table of observations (task index, worker, label).
 
@@ -167,6 +168,7 @@ class DawidSkene:
         observation gives ``votes`` (default: ``weights``) to the class ``vote_classes`` names
         (default: its label, when that is a class; None: no vote) and ``none_votes`` (default 0)
         to "none of these", which also starts with ``none_prior_votes`` on every task.
+        ``independent_workers``: workers that keep the multinomial emission whatever ``emission`` says.
         """
         t = np.asarray(tasks, dtype=np.intp)
         n_obs = t.shape[0]
@@ -196,14 +198,17 @@ class DawidSkene:
         empty = q.sum(axis=1) <= 0
         q[empty] = 1.0
         q /= q.sum(axis=1, keepdims=True)
-        return self.fit_coded(t, wi, li, n_w, n_l, q, w)
+        independent = np.isin(np.asarray(worker_names, dtype=object), list(independent_workers))
+        return self.fit_coded(t, wi, li, n_w, n_l, q, w, independent=independent)
 
     def fit_coded(self, tasks: NDArray[np.intp], workers: NDArray[np.intp], labels: NDArray[np.intp], n_workers: int,
-                  n_labels: int, initial: NDArray[np.float64], weights: NDArray[np.float64] | None = None) -> DawidSkene:
+                  n_labels: int, initial: NDArray[np.float64], weights: NDArray[np.float64] | None = None,
+                  independent: NDArray[np.bool_] | None = None) -> DawidSkene:
         """EM from integer-coded observations (task, worker, label indices) and an initial posterior
         ``initial`` (tasks x classes, rows summing to 1): the core :meth:`fit` calls after coding its
         table, for callers that keep their table coded (``sgbelief.fusion.consensus``). The class,
-        label and worker names are left as they are."""
+        label and worker names are left as they are. ``independent``: per worker, whether it keeps
+        the multinomial emission (default: none does)."""
         t = np.asarray(tasks, dtype=np.intp)
         w = np.ones(t.shape[0]) if weights is None else np.asarray(weights, dtype=np.float64)
         q = np.asarray(initial, dtype=np.float64)
@@ -223,6 +228,8 @@ class DawidSkene:
             else:
                 if it >= 2 and it & (it - 1) == 0:  # iterations 2, 4, 8, 16, ... (module docstring)
                     conc = groups.concentrations(theta, q, self.concentrations)
+                    if independent is not None:
+                        conc[np.asarray(independent, dtype=bool)] = np.inf
                 q_new = groups.e_step(theta, pi, conc)
             delta = float(np.max(np.abs(q_new - q))) if n_t else 0.0
             q = q_new

@@ -343,7 +343,10 @@ class MapConsensus:
             vote = label_class[geo_arr[:, 1]]
             np.add.at(q, (geo_arr[:, 0], np.where(vote >= 0, vote, k)), 1.0)
         q /= q.sum(axis=1, keepdims=True)
-        ds = self._ds.fit_coded(tasks, workers, labels, n_ctx + 2, geo_base + n_geo, q, weights)
+        # the overdispersed emission (docs/method.md §8) is the detector contexts': the support is one
+        # observation per element, and the channel's labels stay independent (measured there)
+        independent = np.arange(n_ctx + 2) >= n_ctx
+        ds = self._ds.fit_coded(tasks, workers, labels, n_ctx + 2, geo_base + n_geo, q, weights, independent=independent)
         ds.classes_ = [*self._classes.names, NONE_CLASS]
         ds.workers_ = [*self._contexts.names, SUPPORT_WORKER, GEOMETRIC_WORKER]
         ds.labels_ = ([f"{c}|b{i}" for c in self._classes.names for i in range(b)]
