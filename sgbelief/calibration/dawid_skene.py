@@ -85,8 +85,13 @@ def dirichlet_multinomial_cells(n: NDArray[np.float64], s: NDArray[np.float64] |
     finite = np.isfinite(s_col[:, 0])
     out = n * np.log(theta)
     if finite.any():
-        a = s_col[finite] * theta[finite]
-        out[finite] = gammaln(n[finite] + a) - gammaln(a)
+        # a single observation: lnG(1 + a) - lnG(a) = ln a exactly (most cells; one log, not two lnG)
+        single = finite & (n[:, 0] == 1.0)
+        out[single] = np.log(s_col[single] * theta[single])
+        many = finite & ~single
+        if many.any():
+            a = s_col[many] * theta[many]
+            out[many] = gammaln(n[many] + a) - gammaln(a)
     return out
 
 
@@ -227,9 +232,7 @@ class DawidSkene:
                 q_new = self._e_step(theta, pi, cells)
             else:
                 if it >= 2 and it & (it - 1) == 0:  # iterations 2, 4, 8, 16, ... (module docstring)
-                    conc = groups.concentrations(theta, q, self.concentrations)
-                    if independent is not None:
-                        conc[np.asarray(independent, dtype=bool)] = np.inf
+                    conc = groups.concentrations(theta, q, self.concentrations, independent)
                 q_new = groups.e_step(theta, pi, conc)
             delta = float(np.max(np.abs(q_new - q))) if n_t else 0.0
             q = q_new
@@ -304,21 +307,37 @@ class _Groups:
         q = np.exp(log_lik)
         return q / q.sum(axis=1, keepdims=True)
 
-    def concentrations(self, theta: NDArray[np.float64], q: NDArray[np.float64],
-                       grid: tuple[float, ...]) -> NDArray[np.float64]:
-        """Per worker, the s in ``grid`` of largest Q_w(s) (the first on a tie)."""
-        th = self._theta(theta)
-        qc = q[self.task]  # (cells, classes): the posterior of each cell's task
+    def concentrations(self, theta: NDArray[np.float64], q: NDArray[np.float64], grid: tuple[float, ...],
+                       independent: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+        """Per worker, the s in ``grid`` of largest Q_w(s) (the first on a tie); inf for the
+        ``independent`` workers, whose cells are not evaluated."""
+        out = np.full(self.n_workers, np.inf)
+        learn = np.ones(self.n_workers, dtype=bool) if independent is None else ~np.asarray(independent, dtype=bool)
+        cells = np.flatnonzero(learn[self.worker])
+        if not len(grid) or not len(cells):
+            return out
+        # a single observation's term is ln s + ln theta (dirichlet_multinomial_cells) and its
+        # q-weighted ln theta part is the same for every s (inf included, whose term is ln theta):
+        # only its ln s is compared. The other cells are evaluated at each s.
+        single = self.count[cells] == 1.0
+        multi = cells[~single]
         n_groups = len(self.totals)
-        best = out = None
+        singles_per_group = np.bincount(self.cell_group[cells[single]], minlength=n_groups).astype(np.float64)
+        th = self._theta(theta)[multi]
+        qc = q[self.task[multi]]  # (cells, classes): the posterior of each cell's task
+        count, cell_group = self.count[multi], self.cell_group[multi]
+        best = None
         for s in grid:
-            per_cell = (qc * dirichlet_multinomial_cells(self.count, s, th)).sum(axis=1)
-            per_group = dirichlet_multinomial_log_likelihood(
-                np.bincount(self.cell_group, weights=per_cell, minlength=n_groups), self.totals, s)
+            per_cell = (qc * dirichlet_multinomial_cells(count, s, th)).sum(axis=1)
+            summed = np.bincount(cell_group, weights=per_cell, minlength=n_groups).astype(np.float64)
+            if np.isfinite(s):
+                summed += singles_per_group * np.log(s)
+            per_group = dirichlet_multinomial_log_likelihood(summed, self.totals, s)
             q_w = np.bincount(self.group_worker, weights=per_group, minlength=self.n_workers)
             if best is None:
-                best, out = q_w, np.full(self.n_workers, s)
+                best = q_w
+                out[learn] = s
                 continue
-            better = q_w > best + 1e-9 * np.abs(best)
+            better = learn & (q_w > best + 1e-9 * np.abs(best))
             out[better], best[better] = s, q_w[better]
-        return out if out is not None else np.full(self.n_workers, np.inf)
+        return out
