@@ -241,3 +241,37 @@ def test_an_independent_worker_keeps_the_multinomial_emission() -> None:
     assert np.isinf(ds.concentrations_[ds.workers_.index("det")])
     plain = DawidSkene(none_class=False).fit(tasks, workers, labels, classes=classes)
     np.testing.assert_allclose(ds.probas_, plain.probas_, atol=1e-10)  # "ref" labels once: nothing to learn
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), fractional=st.booleans())
+def test_the_concentration_search_is_the_brute_force_argmax(seed: int, fractional: bool) -> None:
+    """The search's shortcut (a single observation compared by its ln s alone) picks, per worker,
+    the same s as evaluating Q_w(s) over every cell with the full terms (ties to the larger s)."""
+    from sgbelief.calibration.dawid_skene import CONCENTRATIONS, _Groups
+
+    rng = np.random.default_rng(seed)
+    n_t, n_w, n_l, k = 30, 3, 4, 3
+    rows = rng.integers(0, n_t, 200)
+    cols = rng.integers(0, n_w, 200) * n_l + rng.integers(0, n_l, 200)
+    data = rng.uniform(0.3, 1.0, 200) if fractional else np.ones(200)
+    from scipy import sparse as sp
+    cells = sp.csr_matrix((data, (rows, cols)), shape=(n_t, n_w * n_l))
+    groups = _Groups(cells, n_w, n_l)
+    theta = rng.dirichlet(np.ones(n_l), size=(n_w, k))
+    q = rng.dirichlet(np.ones(k), size=n_t)
+    got = groups.concentrations(theta, q, CONCENTRATIONS)
+    th = theta.transpose(0, 2, 1).reshape(n_w * n_l, k)[groups.col]
+    best = np.full(n_w, -np.inf)
+    want = np.full(n_w, np.inf)
+    for s in CONCENTRATIONS:
+        per_cell = (q[groups.task] * dirichlet_multinomial_cells(groups.count, s, th)).sum(1)
+        per_group = dirichlet_multinomial_log_likelihood(
+            np.bincount(groups.cell_group, weights=per_cell, minlength=len(groups.totals)), groups.totals, s)
+        q_w = np.bincount(groups.group_worker, weights=per_group, minlength=n_w)
+        if np.isinf(s):
+            best = q_w
+            continue
+        better = q_w > best + 1e-9 * np.abs(best)
+        want[better], best[better] = s, q_w[better]
+    np.testing.assert_array_equal(got, want)
