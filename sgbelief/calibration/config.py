@@ -31,10 +31,10 @@ class ConsensusConfig(BaseModel):
     n_iter: int = Field(50, ge=1, description="EM iterations at most per refit")
     emission: Literal["multinomial", "dirichlet_multinomial"] = Field(
         "dirichlet_multinomial",
-        description="how a source's observations of one element are modelled: independent given its class "
-        "(multinomial, Dawid-Skene) or correlated, Dirichlet-multinomial around the source's confusion row with a "
+        description="how a detector context's claims on one element are modelled: independent given its class "
+        "(multinomial, Dawid-Skene) or correlated, Dirichlet-multinomial around the context's confusion row with a "
         "concentration learned from the map (dirichlet_multinomial, default: a detector that mistakes an object "
-        "keeps mistaking it; docs/method.md §8)",
+        "keeps mistaking it; the channel's labels and the support stay independent; docs/method.md §8)",
     )
     adjudicated_elements: Literal["channel", "consensus"] = Field(
         "channel",
