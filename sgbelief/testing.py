@@ -46,7 +46,7 @@ from sgbelief.errors import RetractionError
 from sgbelief.fusion.operators.base import REFERENCE
 from sgbelief.fusion.protocol import STAT_KEYS, Action, FusionOperator, LinearRule, ResetRule, UpdateReport
 from sgbelief.graph.entry_log import EntryLog
-from sgbelief.graph.provenance import ProvenanceEntry, ProvenanceStore
+from sgbelief.graph.provenance import EntryStatus, ProvenanceEntry, ProvenanceStore
 
 _LABELS = ("car", "truck", "person", "building", None)
 
@@ -281,7 +281,8 @@ def apply_store_operations(store: EntryLog, operations: Sequence[StoreOperation]
     ``("record", node, predicate, event_id, t, d_alpha, d_beta, status, stance[, verdict, confidence])``,
     ``("transition", k, status, scale)`` (the k-th waiting entry of the queues, modulo),
     ``("transition_held", k, status, scale)`` (the k-th live entry a ``record`` or ``read_event``
-    returned so far), ``("compact", before_t)``, ``("retract", event_id, cascade_window)``,
+    returned so far), ``("reweigh_held", k, d_alpha, d_beta, stance)`` (new increments for the k-th
+    live committed entry of those), ``("compact", before_t)``, ``("retract", event_id, cascade_window)``,
     ``("read", node, predicate)``, ``("read_event", event_id)``, ``("move", absorb, keep)``,
     ``("remove", node)``."""
     held: list[ProvenanceEntry] = []
@@ -303,6 +304,12 @@ def apply_store_operations(store: EntryLog, operations: Sequence[StoreOperation]
                     choice = [e for e in held if e.alive]
                 if choice:
                     store.transition(choice[k % len(choice)], status, scale=scale)
+                out.append(len(choice))
+            elif kind == "reweigh_held":
+                _, k, d_alpha, d_beta, stance = op
+                choice = [e for e in held if e.alive and e.status is EntryStatus.COMMITTED]
+                if choice:
+                    store.reweigh([(choice[k % len(choice)], d_alpha, d_beta, stance)])
                 out.append(len(choice))
             elif kind == "compact":
                 out.append(store.compact(op[1]))

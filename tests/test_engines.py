@@ -38,9 +38,9 @@ def _streams():
        strata=st.integers(1, 4), geo=st.sampled_from(["none", "verdict", "label"]),
        consensus=st.sampled_from(["none", "dawid_skene"]), every=st.integers(1, 6),
        recall=st.sampled_from(["none", "unanimous", "retroactive"]), min_labels=st.integers(1, 2),
-       adjudicated=st.sampled_from(["channel", "consensus"]))
+       adjudicated=st.sampled_from(["channel", "consensus"]), silent=st.sampled_from(["current", "at_arrival"]))
 def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo, consensus, every, recall, min_labels,
-                                         adjudicated) -> None:
+                                         adjudicated, silent) -> None:
     """Maps, provenance (every entry, in order), queues, stats and calibration buffers are equal."""
     stream, t = [], 0
     for i, (targets, pred, c, ctx, dt, labels) in enumerate(raw):
@@ -54,7 +54,7 @@ def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo, consen
               "recalled_verdicts": recall, "recall_min_labels": min_labels,
               "calibration": {"support_strata": strata, "target_size": 5, "min_refit": 1,
                               "consensus": {"method": consensus, "every": every, "growth": 0.0,
-                                            "adjudicated_elements": adjudicated}}}
+                                            "adjudicated_elements": adjudicated, "silent_weights": silent}}}
     check_fast_matches_reference(name, stream, config, final_tick=t + 100)
 
 

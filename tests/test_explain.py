@@ -24,9 +24,9 @@ TABLE = conformance_table()
 NO_COMPACTION = 1_000_000
 
 
-def _run(name: str, n: int, seed: int, t_prov: int, *, engine: str = "fast", t_compact: int | None = None
-         ) -> SceneGraph:
-    config = OperatorConfig.from_mapping({"t_prov": t_prov, "t_compact": t_compact, "tau_t": 0.1})
+def _run(name: str, n: int, seed: int, t_prov: int, *, engine: str = "fast", t_compact: int | None = None,
+         **extra: Any) -> SceneGraph:
+    config = OperatorConfig.from_mapping({"t_prov": t_prov, "t_compact": t_compact, "tau_t": 0.1, **extra})
     op, graph = make_operator(name, config, TABLE, engine=engine), SceneGraph(engine=engine, create_nodes=True)  # type: ignore[arg-type]
     for ev, labels in random_stream(n, n_nodes=5, seed=seed):
         op.update(graph, ev, FrameLabels(labels))
@@ -41,8 +41,14 @@ def _counts(graph: SceneGraph) -> dict[Any, dict[str, int]]:
 @given(name=st.sampled_from(["comod", "cal", "majority"]), seed=st.integers(0, 10_000),
        t_prov=st.sampled_from([3, 8, 25]), engine=st.sampled_from(["fast", "reference"]))
 def test_counts_per_status_do_not_depend_on_compaction(name: str, seed: int, t_prov: int, engine: str) -> None:
-    compacted = _run(name, 150, seed, t_prov, engine=engine, t_compact=max(1, t_prov // 2))
-    full = _run(name, 150, seed, NO_COMPACTION, engine=engine)
+    # the same horizon, and no pass ever runs in the second: T_prov also bounds how long a silent
+    # claim's weight follows the consensus refits (sgbelief.fusion.reweigh), so it is held equal.
+    # Retroactive withdrawal never reaches a compacted bucket (fusion.queues.withdraw_unadjudicated),
+    # so it depends on the passes by design: the forward-only recall is compared here
+    recall = {"recalled_verdicts": "unanimous"}
+    compacted = _run(name, 150, seed, t_prov, engine=engine, t_compact=max(1, t_prov // 2), **recall)
+    full = _run(name, 150, seed, t_prov, engine=engine, t_compact=NO_COMPACTION, **recall)
+    assert full.provenance.n_compacted == 0
     assert compacted.provenance.n_compacted > 0
     assert _counts(compacted) == _counts(full)
     for key in compacted.provenance.pairs():

@@ -40,6 +40,7 @@ _op = st.one_of(
               _VERDICT, _CONFIDENCE),
     st.tuples(st.just("transition"), st.integers(0, 5), _STATUS, st.sampled_from([1.0, 0.5])),
     st.tuples(st.just("transition_held"), st.integers(0, 5), _STATUS, st.sampled_from([1.0, 0.5])),
+    st.tuples(st.just("reweigh_held"), st.integers(0, 5), _FLOAT, _FLOAT, st.sampled_from([-1, 0, 1])),
     st.tuples(st.just("compact"), st.integers(-2, 4)),
     st.tuples(st.just("retract"), st.sampled_from(["x", "y", "e0", "e3", "e7"]), st.sampled_from([None, 3])),
     st.tuples(st.just("read"), st.sampled_from(_NODES), st.sampled_from(_PREDS)),
@@ -118,6 +119,9 @@ def test_journalled_store_matches_reference(ops: list[tuple[Any, ...]], remember
     # a held committed entry stops counting while the journal holds later commits of its pair
     [("record", "a", "is_p", "x", 1, 0.5, 0.5, EntryStatus.COMMITTED), ("commit", "a", "is_p", "y", 1, 0.25, 0.5, 0),
      ("transition_held", 0, EntryStatus.DISCARDED, 1.0), ("read", "a", "is_p")],
+    # a committed entry weighed again while the journal holds later commits of its pair, then folded
+    [("record", "a", "is_p", "x", 1, 0.5, 0.5, EntryStatus.COMMITTED), ("commit", "a", "is_p", "y", 1, 0.25, 0.5, 0),
+     ("reweigh_held", 0, 0.1, 0.9, -1), ("read", "a", "is_p"), ("compact", -3), ("reweigh_held", 0, 0.2, 0.2, 0)],
     # the old timeline and old journal records of one pair fold in one pass (one fsum over both)
     [("record", "a", "is_p", "new", 1, 0.1, 0.1, EntryStatus.COMMITTED), ("commit", "a", "is_p", "new", 1, 0.2, 0.1, 0),
      ("commit", "b", "is_p", "new", 0, 0.3, 0.1, 0), ("compact", -3), ("read", "a", "is_p")],

@@ -22,6 +22,7 @@ from sgbelief.errors import DuplicateEventError, UnknownNodeError, UnknownPredic
 from sgbelief.fusion import queues
 from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import Verdict
+from sgbelief.fusion.protocol import COUNTED_RESOLUTIONS as _COUNTED_KINDS
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.rules import adjudication, consensus_cell, kl_upper_bound, revision_kl_exceeds, standing
 from sgbelief.graph.provenance import EntryRecord, EntryStatus, EntryVerdict
@@ -126,7 +127,7 @@ def apply_fused(
             cons = op._consensus_of(prov) if pred in consensus_classes else None
             if cons is not None:
                 if cons.due():
-                    cons.refit()
+                    resolutions += op._refit_consensus(prov, cons, t)
                 rivals = exclusive_with(pred)  # type: ignore[misc]
             outcome_of = tables.get(pred) if tables is not None else None
             label_of = None
@@ -313,7 +314,7 @@ def apply_fused(
                 for y, sctx in new_outcomes:
                     add(sctx, pred, c, y)
             if resolutions:
-                op._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved", "withdrawn", "reinstated")])
+                op._count([r for r in resolutions if r.kind in _COUNTED_KINDS])
                 out += resolutions
             if report:
                 reports.append(make_report((eid, t, pred, tuple(outcomes), tuple(resolutions))))  # type: ignore[union-attr]

@@ -242,6 +242,9 @@ class JournalledProvenanceStore(StoreMethods):
             self.materialize()  # the belief is recomputed from the whole log
         self._objects.transition(entry, status, scale=scale, corroborated_by=corroborated_by)
 
+    def reweigh(self, changes: Iterable[tuple[ProvenanceEntry, float, float, int]]) -> None:
+        self.object_log().reweigh(changes)  # entries given are built; the belief is recomputed from the log
+
     def remove(self, entries: Iterable[ProvenanceEntry]) -> None:
         self.object_log().remove(entries)
 

@@ -36,6 +36,12 @@ class ConsensusConfig(BaseModel):
         "concentration learned from the map (dirichlet_multinomial, default: a detector that mistakes an object "
         "keeps mistaking it; the channel's labels and the support stay independent; docs/method.md §8)",
     )
+    silent_weights: Literal["current", "at_arrival"] = Field(
+        "current",
+        description="the calibration a committed silent claim is weighed with: the current one, every such claim "
+        "inside the provenance horizon weighed again after each refit (current, default; docs/method.md §8), or the "
+        "one in force when it arrived (at_arrival)",
+    )
     adjudicated_elements: Literal["channel", "consensus"] = Field(
         "channel",
         description="outcome of a silent claim on an element the channel labelled decisively at other times: the "

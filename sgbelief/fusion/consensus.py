@@ -222,6 +222,25 @@ class MapConsensus:
             for p, n in moved.items():
                 held[p] = held.get(p, 0) + n
 
+    def silent_claims(self) -> list[tuple[str, Any, str, int]]:
+        """(event id, element, predicate, row) of every claim in the table that the channel did
+        not adjudicate, in arrival order; the element is the one it ended up merged into."""
+        rep = self._representatives()
+        names, classes, task, cls, event = self._tasks.names, self._classes.names, self.task, self.cls, self.event
+        return [(event[i], names[rep[task[i]]], classes[cls[i]], i)
+                for i, decisive in enumerate(self.decisive) if not decisive]
+
+    def row_likelihood_ratio(self, row: int) -> tuple[float, float]:
+        """(Lambda_hat, kappa_hat) of the table's claim ``row`` under the current calibration (its
+        cell for its predicate, its cell, its context: the levels of :meth:`likelihood_ratio`)."""
+        cell = self.cell_code[row]
+        return self.calibration.likelihood_ratio(self.conf[row], (cell * _MAX_CLASSES + self.cls[row], cell,
+                                                                  self.ctx_code[row]))
+
+    def row_mass(self, row: int) -> float:
+        """The targeting mass T(v) of the table's claim ``row``."""
+        return self.mass[row]
+
     def drop_events(self, event_ids: set[str]) -> None:
         """Forget the claims of retracted events (the next refit no longer sees them)."""
         keep = [i for i, e in enumerate(self.event) if e not in event_ids]

@@ -42,7 +42,9 @@ class TargetOutcome(NamedTuple):
 
 class QueueResolution(NamedTuple):
     """A queued event leaving its queue: kind in corroborated / released / discarded /
-    resolved / expired / confirmed / dismissed."""
+    resolved / expired / confirmed / dismissed; or, outside the queues, a belief that changed
+    without an event targeting it: withdrawn / reinstated (recalled verdicts) and reweighed (a
+    silent claim weighed again after a consensus refit, ``sgbelief.fusion.reweigh``)."""
 
     event_id: str | None
     node: Any
@@ -82,6 +84,12 @@ STAT_KEYS: tuple[str, ...] = (
     "events", "targets", "committed", "refused", "quarantined", "released", "corroborated", "discarded",
     "resolved", "expired", "withdrawn", "reinstated", "below_tau_t", "compacted",
 )
+
+
+#: the resolution kinds an operator's ``stats`` counts as they happen (the queues' timeouts count
+#: themselves); ``reweighed`` (entries weighed again after a consensus refit) is outside STAT_KEYS
+COUNTED_RESOLUTIONS: frozenset[str] = frozenset({"corroborated", "discarded", "resolved", "withdrawn", "reinstated",
+                                                 "reweighed"})
 
 
 def new_stats() -> dict[str, int]:

@@ -63,6 +63,10 @@ class EntryLog(Protocol):
                    corroborated_by: str | None = None) -> None:
         """Move an entry to a new status (the only way an entry's status changes)."""
 
+    def reweigh(self, changes: Iterable[tuple[ProvenanceEntry, float, float, int]]) -> None:
+        """New increments and stance for committed entries, ``(entry, d_alpha, d_beta, stance)``
+        each; the pairs touched get their belief recomputed from their logs (Eq. 4)."""
+
     def remove(self, entries: Iterable[ProvenanceEntry]) -> None:
         """Entries leave the store (logs, event index, pending lists); a pair left without
         entries is dropped, the others' beliefs are recomputed from their logs (Eq. 4)."""

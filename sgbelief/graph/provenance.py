@@ -255,6 +255,25 @@ class ProvenanceStore(StoreMethods):
         if corroborated_by is not None:
             entry.corroborated_by = [*(entry.corroborated_by or ()), corroborated_by]
 
+    def reweigh(self, changes: Iterable[tuple[ProvenanceEntry, float, float, int]]) -> None:
+        """Give committed entries new increments and stance, ``(entry, d_alpha, d_beta, stance)``
+        each: a claim weighed again under a refitted calibration (docs/method.md §8, "Silent claims
+        under the current calibration"). The pairs touched get their belief recomputed from their
+        logs (Eq. 4), in the order first touched. Only committed entries change: a pending entry
+        carries what it would add once counted, a compacted one what it folded."""
+        touched: dict[PairKey, None] = {}
+        for entry, d_alpha, d_beta, stance in changes:
+            if not entry.alive:
+                raise RetractionError(f"entry of event {entry.event_id!r} is no longer in the store")
+            if entry.status is not _COMMITTED:
+                raise ValueError(f"only committed entries are weighed again, not {entry.status.value} "
+                                 f"(event {entry.event_id!r})")
+            entry.d_alpha, entry.d_beta, entry.stance = d_alpha, d_beta, stance
+            touched[(entry.node, entry.predicate)] = None
+        pairs = self._pairs
+        for key in touched:
+            self._refresh(pairs[key])
+
     def remove(self, entries: Iterable[ProvenanceEntry]) -> None:
         """Entries leave the store (retraction): out of their logs, the event index and the
         pending lists (the queues and the timeline drop them lazily); a pair left without

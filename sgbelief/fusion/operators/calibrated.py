@@ -20,9 +20,11 @@ from sgbelief.fusion import queues
 from sgbelief.fusion.compatibility import SubsumptionTable, Verdict
 from sgbelief.fusion.config import OperatorConfig, paper_variant, resolve_config
 from sgbelief.fusion.operators.base import BaseOperator, OperatorEngine
+from sgbelief.fusion.protocol import COUNTED_RESOLUTIONS as _COUNTED_KINDS
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
 from sgbelief.fusion.consensus import MapConsensus
 from sgbelief.fusion.label_memory import LabelMemory
+from sgbelief.fusion.reweigh import reweigh_silent_claims
 from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_exceeds: re-exported)
     ENTRY_VERDICT,
     adjudication,
@@ -185,7 +187,7 @@ class CalibratedOperator(BaseOperator):
             resolutions = self.tick(graph, event.t) if event.t > graph.clock else []
             consensus = self._consensus_of(graph.provenance) if event.predicate in self.consensus_classes else None
             if consensus is not None and consensus.due():  # batched: never per event over the map
-                consensus.refit()
+                resolutions += self._refit_consensus(graph.provenance, consensus, event.t)
             memory = self._label_memory_of(graph.provenance) if self.recalls_verdicts else None
             recall_table = self.vocabulary.outcome_tables().get(event.predicate) if memory is not None else None  # type: ignore[union-attr]
             outcomes: list[TargetOutcome] = []
@@ -223,7 +225,7 @@ class CalibratedOperator(BaseOperator):
                              tally[Action.QUARANTINED], tally[Action.REFUSED])
             self._feed_calibration(event, verified)
             if resolutions:
-                self._count([r for r in resolutions if r.kind in ("corroborated", "discarded", "resolved", "withdrawn", "reinstated")])
+                self._count([r for r in resolutions if r.kind in _COUNTED_KINDS])
                 out += resolutions
             if reports is not None:
                 reports.append(make_report((event.id, event.t, event.predicate, tuple(outcomes), tuple(resolutions))))
@@ -314,6 +316,17 @@ class CalibratedOperator(BaseOperator):
         found = consensus.likelihood_ratio(c, cell, pred, event.context) if y is None else None
         consensus.add_claim(node, pred, event.context, c, cell, y is not None, event.id, mass)
         return found if found is not None else self.calibrator_.likelihood_ratio(c, context, pred)
+
+    def _refit_consensus(self, prov: EntryLog, consensus: MapConsensus, t: int) -> list[QueueResolution]:
+        """Refit the map's consensus; with ``silent_weights: current`` its committed silent claims of
+        the last T_prov steps then take the new calibration
+        (:func:`~sgbelief.fusion.reweigh.reweigh_silent_claims`), each entry that changed reported
+        as a ``reweighed`` resolution at time ``t``."""
+        consensus.refit()
+        if self.config.calibration.consensus.silent_weights != "current":
+            return []
+        return [QueueResolution(eid, node, pred, "reweighed", t)
+                for eid, node, pred in reweigh_silent_claims(prov, consensus, self.config.w0, t - self.config.t_prov)]
 
     def _consensus_of(self, prov: EntryLog) -> MapConsensus:
         """The consensus of one provenance store (created on first use)."""
