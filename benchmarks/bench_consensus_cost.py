@@ -53,7 +53,7 @@ def main() -> None:
     else:
         events = simulate(args.suite, args.seed).events_for("vlm_a", "oracle")
         table = SubsumptionTable.shipped(SUITES[args.suite].vocab)
-        label = f"{args.suite} suite
+        label = f"{args.suite} suite"
     cost: dict[str, list[float]] = {k: [] for k in CONFIGS}
     for _ in range(args.rounds):
         for name, cfg in CONFIGS.items():

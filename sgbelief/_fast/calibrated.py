@@ -199,7 +199,7 @@ def apply_fused(
                     cell = consensus_cell(ctx, stratum, adjudication(label, y), standing(n_same, n_others, max_other),
                                           "whole" if mass >= 0.5 else "part")  # rules.targeting
                     found = cons.likelihood_ratio(c, cell, pred, ctx) if y is None else None
-                    cons.add_claim(node, pred, ctx, c, cell, y is not None, eid, mass)
+                    cons.add_claim(node, pred, ctx, c, cell, y is not None, eid, mass, t)
                     if found is not None:
                         lam, kappa = found
                 claim_pos = (lam > 1.0) if (cal_sign and lam != 1.0) else raw_pos

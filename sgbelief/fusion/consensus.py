@@ -36,6 +36,7 @@ Per-event work is O(1): appending a row and two dictionary updates.
 
 from __future__ import annotations
 
+import math
 from array import array
 from collections.abc import Hashable, Mapping
 from typing import Any
@@ -123,6 +124,7 @@ class MapConsensus:
         self.task, self.cls, self.ctx_code, self.cell_code = array("l"), array("l"), array("l"), array("l")
         self.conf = array("d")
         self.mass = array("d")
+        self.time = array("q")
         self.decisive = bytearray()
         self.event: list[str] = []
         #: the channel's labels: label code per (element, time) seen
@@ -188,14 +190,16 @@ class MapConsensus:
         return rep
 
     def add_claim(self, node: Any, predicate: str, context: str, confidence: float, cell: Hashable,
-                  decisive: bool, event_id: str, mass: float = 1.0) -> None:
-        """Append one applied claim of an exclusive class (``mass``: its targeting mass T(v))."""
+                  decisive: bool, event_id: str, mass: float = 1.0, t: int = 0) -> None:
+        """Append one applied claim of an exclusive class (``mass``: its targeting mass T(v); ``t``:
+        its event's time)."""
         self.task.append(self._task_code(node))
         self.cls.append(self._classes.code(predicate))
         self.ctx_code.append(self._contexts.code(context))
         self.cell_code.append(self._cells.code(cell))
         self.conf.append(confidence)
         self.mass.append(mass)
+        self.time.append(t)
         self.decisive.append(1 if decisive else 0)
         self.event.append(event_id)
         held = self.counts.get(node)
@@ -222,13 +226,18 @@ class MapConsensus:
             for p, n in moved.items():
                 held[p] = held.get(p, 0) + n
 
-    def silent_claims(self) -> list[tuple[str, Any, str, int]]:
+    def silent_claims(self, since: float = -math.inf) -> list[tuple[str, Any, str, int]]:
         """(event id, element, predicate, row) of every claim in the table that the channel did
-        not adjudicate, in arrival order; the element is the one it ended up merged into."""
+        not adjudicate and whose event time is at least ``since``, in arrival order; the element is
+        the one it ended up merged into."""
+        if not self.event:
+            return []
+        silent = np.frombuffer(bytes(self.decisive), dtype=np.uint8) == 0
+        if since > -math.inf:
+            silent &= np.frombuffer(self.time, dtype=np.int64) >= since
         rep = self._representatives()
         names, classes, task, cls, event = self._tasks.names, self._classes.names, self.task, self.cls, self.event
-        return [(event[i], names[rep[task[i]]], classes[cls[i]], i)
-                for i, decisive in enumerate(self.decisive) if not decisive]
+        return [(event[i], names[rep[task[i]]], classes[cls[i]], i) for i in np.flatnonzero(silent).tolist()]
 
     def row_likelihood_ratio(self, row: int) -> tuple[float, float]:
         """(Lambda_hat, kappa_hat) of the table's claim ``row`` under the current calibration (its
@@ -246,7 +255,7 @@ class MapConsensus:
         keep = [i for i, e in enumerate(self.event) if e not in event_ids]
         if len(keep) == len(self.event):
             return
-        for name in ("task", "cls", "ctx_code", "cell_code", "conf", "mass"):
+        for name in ("task", "cls", "ctx_code", "cell_code", "conf", "mass", "time"):
             col = getattr(self, name)
             setattr(self, name, array(col.typecode, [col[i] for i in keep]))
         self.decisive = bytearray(self.decisive[i] for i in keep)

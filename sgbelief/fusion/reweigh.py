@@ -67,7 +67,7 @@ def reweigh_silent_claims(prov: EntryLog, consensus: MapConsensus, w0: float, se
     since) keeps its entries as they are."""
     changes: list[tuple[ProvenanceEntry, float, float, int]] = []
     rows_of: dict[tuple[str, Any], list[tuple[str, int]]] = {}
-    for event_id, node, predicate, row in consensus.silent_claims():
+    for event_id, node, predicate, row in consensus.silent_claims(settled_before):
         rows_of.setdefault((event_id, node), []).append((predicate, row))
     entries_of = prov.event_entries
     for (event_id, node), rows in rows_of.items():

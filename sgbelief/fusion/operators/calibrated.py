@@ -314,7 +314,7 @@ class CalibratedOperator(BaseOperator):
         cell = consensus_cell(event.context, stratum, adjudication(label, y), standing(n_same, n_others, max_other),
                               targeting(mass))
         found = consensus.likelihood_ratio(c, cell, pred, event.context) if y is None else None
-        consensus.add_claim(node, pred, event.context, c, cell, y is not None, event.id, mass)
+        consensus.add_claim(node, pred, event.context, c, cell, y is not None, event.id, mass, event.t)
         return found if found is not None else self.calibrator_.likelihood_ratio(c, context, pred)
 
     def _refit_consensus(self, prov: EntryLog, consensus: MapConsensus, t: int) -> list[QueueResolution]:
