@@ -55,7 +55,7 @@ class OperatorConfig(_Frozen):
     t_cor: int = Field(10, ge=0, description="corroboration window of the quarantine Q")
     k: float = Field(4.0, ge=1.0, description="timeout release weight divisor (w / k)")
     w0: float = Field(1.0, gt=0.0, description="base per-evidence weight")
-    t_prov: int = Field(1000, ge=1, description="provenance compaction horizon")
+    t_prov: int = Field(1000, ge=1, description="provenance horizon: entries older than this many time steps are settled; compaction folds them, and a silent claim's weight follows the consensus refits only until then")
     t_compact: int | None = Field(
         None,
         ge=1,
