@@ -377,3 +377,25 @@ def test_a_detectors_repeated_mistakes_on_one_object_count_as_correlated() -> No
         return float(-np.mean(np.log(np.clip(p, 1e-12, 1.0))))
 
     assert log_loss(dm) < log_loss(plain), (log_loss(dm), log_loss(plain))
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=st.data(), cold=st.sampled_from(["raw", "neutral"]), target=st.sampled_from([1, 5, 50]))
+def test_the_batched_likelihood_ratios_equal_the_scalar_ones(data, cold, target) -> None:
+    """ConsensusCalibration.likelihood_ratios (the reweighing's batch) gives, claim by claim, what
+    likelihood_ratio gives: tolerance 1e-12 relative (numpy's interpolation and logs against the
+    scalar ones), on random fits over three levels, keys that were fitted or not, any confidence."""
+    n = data.draw(st.integers(1, 40))
+    levels = [data.draw(st.lists(st.integers(0, 4), min_size=n, max_size=n)) for _ in range(3)]
+    c = data.draw(st.lists(st.floats(0.0, 1.0), min_size=n, max_size=n))
+    q = data.draw(st.lists(st.floats(0.0, 1.0), min_size=n, max_size=n))
+    cal = ConsensusCalibration(target_size=target, cold_start=cold).fit(
+        [np.asarray(lv) for lv in levels], np.asarray(c), np.asarray(q))
+    m = data.draw(st.integers(1, 30))
+    qc = np.asarray(data.draw(st.lists(st.floats(0.0, 1.0), min_size=m, max_size=m)))
+    keys = [np.asarray(data.draw(st.lists(st.integers(0, 6), min_size=m, max_size=m))) for _ in range(3)]
+    lams, kappas = cal.likelihood_ratios(qc, keys)
+    for i in range(m):
+        lam, kappa = cal.likelihood_ratio(float(qc[i]), tuple(int(k[i]) for k in keys))
+        assert math.isclose(lams[i], lam, rel_tol=1e-12), (i, lams[i], lam)
+        assert math.isclose(kappas[i], kappa, rel_tol=1e-12, abs_tol=1e-15), (i, kappas[i], kappa)

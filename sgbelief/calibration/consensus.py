@@ -123,6 +123,36 @@ class ConsensusCalibration:
         log_lr = min(max(log_lr, -self.log_lr_max), self.log_lr_max)
         return _exp(log_lr), max(self.kappa_min, kappa)
 
+    def likelihood_ratios(self, c: np.ndarray, keys: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`likelihood_ratio` of many claims at once: confidences ``c``, one key array per level
+        (finest first). The same shrinkage level by level, with numpy's linear interpolation between
+        each cell's knots (equal to the scalar call up to rounding; tests/test_consensus.py)."""
+        c = np.asarray(c, dtype=np.float64)
+        if self.cold_start == "neutral":
+            log_lr = np.zeros_like(c)
+        else:
+            cc = np.clip(c, 1e-6, 1.0 - 1e-6)
+            log_lr = np.clip(np.log(cc / (1.0 - cc)), -self.log_lr_max, self.log_lr_max)
+        kappa = np.zeros_like(c)
+        fits = self.fits_
+        for lvl in range(len(keys) - 1, -1, -1):  # coarsest first, as likelihood_ratio
+            k = np.asarray(keys[lvl], dtype=np.int64)
+            order = np.argsort(k, kind="stable")
+            uniq, starts = np.unique(k[order], return_index=True)
+            ends = np.append(starts[1:], len(order))
+            for key, a, b in zip(uniq.tolist(), starts.tolist(), ends.tolist()):
+                fit = fits.get((lvl, key))
+                if fit is None:
+                    continue
+                kx, ky, n, eps = fit
+                ix = order[a:b]
+                level = min(1.0, n / self.target_size)
+                p = np.clip(np.interp(c[ix], kx, ky), eps, 1.0 - eps)  # Eq. 2, uniform reference
+                log_lr[ix] = level * np.log(p / (1.0 - p)) + (1.0 - level) * log_lr[ix]
+                kappa[ix] = level + (1.0 - level) * kappa[ix]
+        log_lr = np.clip(log_lr, -self.log_lr_max, self.log_lr_max)
+        return np.exp(log_lr), np.maximum(self.kappa_min, kappa)
+
     @property
     def fitted(self) -> bool:
         """Whether any cell has been fitted."""

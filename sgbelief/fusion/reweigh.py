@@ -70,6 +70,7 @@ def reweigh_silent_claims(prov: EntryLog, consensus: MapConsensus, w0: float, se
     for event_id, node, predicate, row in consensus.silent_claims(settled_before):
         rows_of.setdefault((event_id, node), []).append((predicate, row))
     entries_of = prov.event_entries
+    found: list[tuple[ProvenanceEntry, list[ProvenanceEntry], int]] = []
     for (event_id, node), rows in rows_of.items():
         entries = [e for e in entries_of(event_id) if e.node == node and e.status is _COMMITTED]
         if not entries:
@@ -77,11 +78,14 @@ def reweigh_silent_claims(prov: EntryLog, consensus: MapConsensus, w0: float, se
         claims = [e for e in entries if e.verdict is _SILENT]
         if len(rows) != 1 or len(claims) != 1 or claims[0].predicate != rows[0][0]:
             continue
-        claim = claims[0]
-        if claim.t < settled_before:
+        if claims[0].t < settled_before:
             continue
-        lam, kappa = consensus.row_likelihood_ratio(rows[0][1])
-        d_alpha, d_beta, stance = silent_claim_increments(lam, kappa, consensus.row_mass(rows[0][1]), w0)
+        found.append((claims[0], entries, rows[0][1]))
+    if not found:
+        return []
+    lams, kappas = consensus.rows_likelihood_ratios([row for _, _, row in found])
+    for (claim, entries, row), lam, kappa in zip(found, lams.tolist(), kappas.tolist()):
+        d_alpha, d_beta, stance = silent_claim_increments(lam, kappa, consensus.row_mass(row), w0)
         if d_alpha == claim.d_alpha and d_beta == claim.d_beta:
             continue
         changes.append((claim, d_alpha, d_beta, stance))
