@@ -78,8 +78,6 @@ def reweigh_silent_claims(prov: EntryLog, consensus: MapConsensus, w0: float, se
         claims = [e for e in entries if e.verdict is _SILENT]
         if len(rows) != 1 or len(claims) != 1 or claims[0].predicate != rows[0][0]:
             continue
-        if claims[0].t < settled_before:
-            continue
         found.append((claims[0], entries, rows[0][1]))
     if not found:
         return []
