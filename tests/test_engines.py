@@ -38,9 +38,10 @@ def _streams():
        strata=st.integers(1, 4), geo=st.sampled_from(["none", "verdict", "label"]),
        consensus=st.sampled_from(["none", "dawid_skene"]), every=st.integers(1, 6),
        recall=st.sampled_from(["none", "unanimous", "retroactive"]), min_labels=st.integers(1, 2),
-       adjudicated=st.sampled_from(["channel", "consensus"]), silent=st.sampled_from(["current", "at_arrival"]))
+       adjudicated=st.sampled_from(["channel", "consensus"]), silent=st.sampled_from(["current", "at_arrival"]),
+       contested=st.sampled_from(["refuse", "weigh"]))
 def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo, consensus, every, recall, min_labels,
-                                         adjudicated, silent) -> None:
+                                         adjudicated, silent, contested) -> None:
     """Maps, provenance (every entry, in order), queues, stats and calibration buffers are equal."""
     stream, t = [], 0
     for i, (targets, pred, c, ctx, dt, labels) in enumerate(raw):
@@ -51,7 +52,7 @@ def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo, consen
         ev = EvidenceEvent(targets, pred, c, ctx, t, f"e{i}")
         stream.append((ev, {node: labels[j % 3] for j, node in enumerate(sorted(targets))}))
     config = {"tau_rev": tau_rev, "t_prov": 25, "t_cor": 3, "t_disagree": 3, "geometric_evidence": geo,
-              "recalled_verdicts": recall, "recall_min_labels": min_labels,
+              "recalled_verdicts": recall, "recall_min_labels": min_labels, "contested_labels": contested,
               "calibration": {"support_strata": strata, "target_size": 5, "min_refit": 1,
                               "consensus": {"method": consensus, "every": every, "growth": 0.0,
                                             "adjudicated_elements": adjudicated, "silent_weights": silent}}}

@@ -11,7 +11,8 @@ from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import SubsumptionTable
 from sgbelief.fusion.events import EvidenceEvent
 from sgbelief.fusion.label_memory import LabelMemory
-from sgbelief.fusion.rules import recalled_outcome
+from sgbelief.fusion.consensus import MapConsensus
+from sgbelief.fusion.rules import consensus_agrees, labels_contested, recalled_outcome
 from sgbelief.graph.provenance import EntryStatus, EntryVerdict
 
 CLASSES = ["bed", "chair", "sofa"]
@@ -100,8 +101,11 @@ def test_the_paper_variant_and_cal_do_not_recall() -> None:
     assert not make_operator("comod_paper", None, _table()).withdraws_unadjudicated
     # a withdrawal moves the refused pair's belief: such a configuration does not claim Property 2
     assert not make_operator("comod", {"geometric_evidence": "none"}, _table()).claims_property2
-    assert make_operator("comod", {"geometric_evidence": "none", "recalled_verdicts": "unanimous"},
-                         _table()).claims_property2
+    assert make_operator("comod", {"geometric_evidence": "none", "recalled_verdicts": "unanimous",
+                                   "contested_labels": "refuse"}, _table()).claims_property2
+    # a claim at an element whose labels contradict each other is weighed: not Property 2 either
+    assert not make_operator("comod", {"geometric_evidence": "none", "recalled_verdicts": "unanimous"},
+                             _table()).claims_property2
 
 
 @pytest.mark.parametrize("engine", ["fast", "reference"])
@@ -248,3 +252,83 @@ def test_withdrawn_entries_survive_a_save_and_a_load(tmp_path, fmt: str) -> None
     assert any(s == "withdrawn" for *_, s in statuses(h))
     for pred in ("is_bed", "is_sofa", "is_chair"):
         assert h.provenance.alpha_beta("v", pred) == pytest.approx(g.provenance.alpha_beta("v", pred))
+
+
+def test_labels_contested_by_hand() -> None:
+    out = {"bed": 1, "chair": 0, "sofa": 0}
+    assert labels_contested(out, {"bed": 1, "chair": 5})  # asserted once, denied five times
+    assert labels_contested(out, {"bed": 4, "sofa": 1, "otherprop": 2})
+    assert not labels_contested(out, {"chair": 3, "sofa": 2})  # unanimous denial
+    assert not labels_contested(out, {"bed": 2, "otherprop": 7})  # silent labels do not count
+    assert not labels_contested(out, {})
+    mem = LabelMemory()
+    mem.add("v", 0, "bed")
+    assert not mem.contested("v", out) and not mem.contested("w", out)
+    mem.add("v", 1, "chair")
+    assert mem.contested("v", out)
+
+
+def _seen(engine: str, labels: list[str], config: dict | None = None):
+    """One confident 'bed' claim on v per frame, the channel labelling v ``labels[t]`` in frame t."""
+    op = make_operator("comod", config, _table(), engine=engine)
+    g = SceneGraph(create_nodes=True)
+    op.update_many(g, [(EvidenceEvent({"v": 1.0}, "is_bed", 0.9, "det", t, f"e{t}"), FrameLabels({"v": lab}))
+                       for t, lab in enumerate(labels)])
+    return op, g
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_a_channel_that_contradicts_itself_refuses_nothing_more(engine: str) -> None:
+    """A sofa the channel labels 'bed' once and 'chair' after: from the first 'chair' on, the
+    element's labels are contested and the 'bed' claims of the 'chair' frames are weighed (the ⊥
+    verdict recorded), not refused; with ``contested_labels: refuse`` they are refused."""
+    labels = ["bed", "chair", "chair", "chair"]
+    op, g = _seen(engine, labels, {"contested_labels": "weigh"})
+    entries = {e.event_id: e for e in g.provenance.entries("v", "is_bed") if e.verdict is not EntryVerdict.GEOMETRIC}
+    assert op.weighs_contested and not op.claims_property2
+    assert entries["e0"].verdict is EntryVerdict.CORROBORATES
+    for t in (1, 2, 3):
+        assert entries[f"e{t}"].verdict is EntryVerdict.CONTRADICTS
+        assert entries[f"e{t}"].status is EntryStatus.COMMITTED
+    assert g.provenance.alpha_beta("v", "is_bed") == pytest.approx(g.provenance.reconstruct("v", "is_bed"))
+    op_r, g_r = _seen(engine, labels, {"contested_labels": "refuse"})
+    assert not op_r.weighs_contested
+    refused = [e for e in g_r.provenance.entries("v", "is_bed") if e.status is EntryStatus.REFUSED]
+    assert sorted(e.event_id for e in refused) == ["e1", "e2", "e3"]
+    assert g.probability("v", "is_bed") > g_r.probability("v", "is_bed")
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+def test_a_unanimous_channel_still_refuses(engine: str) -> None:
+    """Labels that only ever deny the class (a chair filed under sofa in every frame) refuse every
+    claim, as before: only a channel that has also asserted the class is overruled."""
+    _, g = _seen(engine, ["chair", "sofa", "chair"])
+    claims = [e for e in g.provenance.entries("v", "is_bed") if e.verdict is not EntryVerdict.GEOMETRIC]
+    assert len(claims) == 3 and all(e.status is EntryStatus.REFUSED for e in claims)
+    assert g.probability("v", "is_bed") < 0.5
+    op = make_operator("comod_paper", None, _table())
+    assert op.config.contested_labels == "refuse" and not op.weighs_contested
+
+
+def test_consensus_agrees_by_hand() -> None:
+    assert consensus_agrees(True, 0.5) and consensus_agrees(True, 0.9) and not consensus_agrees(True, 0.49)
+    assert consensus_agrees(False, 0.2) and not consensus_agrees(False, 0.5)
+    assert not consensus_agrees(True, None) and not consensus_agrees(False, None)  # no fit: the refusal stands
+
+
+@pytest.mark.parametrize("engine", ["fast", "reference"])
+@pytest.mark.parametrize("q, refused", [(0.9, False), (0.1, True), (None, True)])
+def test_at_a_contested_element_the_consensus_decides(engine: str, monkeypatch, q, refused) -> None:
+    """``contested_labels: consensus`` (the default): the 'bed' claims of the 'chair' frames, at an
+    element the channel has also labelled 'bed', are weighed when the consensus' posterior of bed at
+    v is at least one half, refused when it is below or when there is no fit. The claims of the
+    first, unanimous 'chair' frames are refused whatever the posterior."""
+    monkeypatch.setattr(MapConsensus, "posterior", lambda self, node, pred: q)
+    op, g = _seen(engine, ["chair", "bed", "chair", "chair"])
+    assert op.config.contested_labels == "consensus" and op.weighs_contested
+    status = {e.event_id: e.status for e in g.provenance.entries("v", "is_bed") if e.verdict is not EntryVerdict.GEOMETRIC}
+    assert status["e0"] in (EntryStatus.REFUSED, EntryStatus.RESOLVED)  # unanimous until e1 (then resolved by it)
+    assert status["e1"] is EntryStatus.COMMITTED  # corroborated
+    for t in (2, 3):
+        assert (status[f"e{t}"] is not EntryStatus.COMMITTED) == refused
+        assert (status[f"e{t}"] is EntryStatus.REFUSED) == refused

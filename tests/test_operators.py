@@ -17,6 +17,7 @@ from sgbelief.fusion.events import EvidenceEvent
 from sgbelief.fusion.protocol import Action, FusionOperator, UpdateReport
 from sgbelief.api.operators import make_operator
 from sgbelief.fusion.registry import OPERATOR_NAMES
+from sgbelief.fusion.rules import labels_contested
 from sgbelief.graph.provenance import EntryStatus
 from sgbelief.graph.scene_graph import SceneGraphModel
 from sgbelief.testing import check_fusion_operator, conformance_table
@@ -108,19 +109,27 @@ def test_property2_comod_never_commits_a_contradicted_claim(stream, variant) -> 
     that claims it; with ``geometric_evidence: verdict`` (the default) the belief moves only by the
     geometric label's observation, i.e. away from what the refused claim asserts."""
     if variant == "comod_refusal_only":
-        op = make_operator("comod", {"tau_rev": 0.2, "geometric_evidence": "none", "recalled_verdicts": "unanimous"},
-                           TABLE)
+        op = make_operator("comod", {"tau_rev": 0.2, "geometric_evidence": "none", "recalled_verdicts": "unanimous",
+                                     "contested_labels": "refuse"}, TABLE)
     else:
         op = make_operator(variant, {"tau_rev": 0.2}, TABLE)
     assert op.claims_property2 == (variant != "comod")
     g = SceneGraphModel(create_nodes=True)
     t = 0
+    labels_of: dict[str, dict[str, int]] = {}  # the channel's labels of each element so far (frames)
     for node, pred, c, label, ctx, dt in stream:
         t += dt
         op.tick(g, t)  # time-driven releases are not caused by the event
         before = g.provenance.alpha_beta(node, pred)
+        if label is not None:
+            held = labels_of.setdefault(node, {})
+            held[label] = held.get(label, 0) + 1
         rep = op.update(g, EvidenceEvent({node: 1.0}, pred, c, ctx, t), FrameLabels({node: label}))
         out = rep.targets[0]
+        if out.verdict is Verdict.CONTRADICTS and out.action is not Action.REFUSED:
+            # ``contested_labels: weigh`` (comod's default): the element's labels both asserted and denied phi
+            assert op.weighs_contested and labels_contested(TABLE.outcome_tables()[pred], labels_of[node])
+            continue
         if out.verdict is Verdict.CONTRADICTS:
             assert out.action is Action.REFUSED
             after = g.provenance.alpha_beta(node, pred)

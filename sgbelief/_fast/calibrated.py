@@ -24,7 +24,14 @@ from sgbelief.fusion.channel import FrameLabels
 from sgbelief.fusion.compatibility import Verdict
 from sgbelief.fusion.protocol import COUNTED_RESOLUTIONS as _COUNTED_KINDS
 from sgbelief.fusion.protocol import Action, Items, QueueResolution, TargetOutcome, UpdateReport, make_report
-from sgbelief.fusion.rules import adjudication, consensus_cell, kl_upper_bound, revision_kl_exceeds, standing
+from sgbelief.fusion.rules import (
+    adjudication,
+    consensus_agrees,
+    consensus_cell,
+    kl_upper_bound,
+    revision_kl_exceeds,
+    standing,
+)
 from sgbelief.graph.provenance import EntryRecord, EntryStatus, EntryVerdict
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -109,6 +116,8 @@ def apply_fused(
     tick = op.tick
     memory = op._label_memory_of(prov) if op.recalls_verdicts else None  # recalled verdicts (fusion.label_memory)
     withdraws, withdraw_judged = op.withdraws_unadjudicated, op._withdraw_judged  # recalled_verdicts: retroactive
+    weighs_contested = op.weighs_contested  # contested_labels: weigh or consensus
+    weighs_all_contested = weighs_contested and cfg.contested_labels == "weigh"
     out: list[QueueResolution] = []
     n_events = n_targets = n_below = n_committed = n_quarantined = n_refused = 0
     try:
@@ -251,7 +260,11 @@ def apply_fused(
                 w = w0 * kappa * mass
                 da = w * lam / (1.0 + lam)
                 db = w / (1.0 + lam)
-                if comod and verdict is _CONTRA:
+                if comod and verdict is _CONTRA and not (  # contested labels (rules.labels_contested)
+                        weighs_contested and y is not None and recall_of is not None
+                        and memory.contested(node, recall_of)  # type: ignore[union-attr]
+                        and (weighs_all_contested or consensus_agrees(
+                            claim_pos, cons.posterior(node, pred) if cons is not None else None))):
                     # Property 2: refused and logged, never committed; geometry's stance opposes the claim
                     stance = -1 if claim_pos else 1
                     had_pending = key in pending_map

@@ -86,6 +86,13 @@ class OperatorConfig(_Frozen):
         "contradict them; none: only the claim's own frame counts (the paper)",
     )
     recall_min_labels: int = Field(1, ge=1, description="decisive earlier labels needed before a verdict is recalled")
+    contested_labels: Literal["refuse", "weigh", "consensus"] = Field(
+        "consensus",
+        description="comod, with recalled verdicts on: a claim its own frame's label contradicts, at an element whose "
+        "labels have both asserted and denied the predicate (the channel contradicted itself there, docs/method.md "
+        "§8), is weighed as cal weighs it when the map-wide consensus sides with the claim (consensus, default; "
+        "refused when no consensus runs), always (weigh), or refused like any contradicted claim (refuse, the paper)",
+    )
     verdict_sign: Literal["calibrated", "raw"] = Field(
         "calibrated",
         description="sign of a claim for the verdict: calibrated Lambda_hat > 1 (default, invariant under "
@@ -152,6 +159,7 @@ PAPER_SETTINGS: dict[str, Any] = {
     "exclusive_evidence": "none",
     "verdict_sign": "raw",
     "recalled_verdicts": "none",
+    "contested_labels": "refuse",
     "calibration": {"lr_reference": "slice", "kappa_pooling": "slice", "support_strata": 1,
                     "consensus": {"method": "none"}},
 }

@@ -401,6 +401,18 @@ class MapConsensus:
         i = self._tasks.index.get(node, -1)
         return int(self._row_of_code[i]) if 0 <= i < len(self._row_of_code) else -1
 
+    def posterior(self, node: Any, predicate: str) -> float | None:
+        """q_v(phi) of the last fit (the Dawid–Skene posterior of ``predicate`` at ``node``), or
+        None when there was no fit yet or the element or the class was not in it."""
+        ds = getattr(self, "ds_", None)
+        if ds is None:
+            return None
+        row, col = self.task_of(node), self.class_of(predicate)
+        probas = ds.probas_
+        if row < 0 or not 0 <= col < probas.shape[1] - 1:  # (the last column is "none")
+            return None
+        return float(probas[row, col])
+
     def _label_class(self, label: str) -> int:
         for p in self.asserted.get(label, ()):
             i = self._classes.index.get(p)

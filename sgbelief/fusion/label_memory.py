@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from sgbelief.fusion.rules import recalled_outcome
+from sgbelief.fusion.rules import labels_contested, recalled_outcome
 
 __all__ = ["LabelMemory"]
 
@@ -60,6 +60,12 @@ class LabelMemory:
         """The outcome the element's labels agree on for a predicate with ``outcomes`` (label -> y), or None."""
         held = self.counts.get(node)
         return None if not held else recalled_outcome(outcomes, held, self.min_labels)
+
+    def contested(self, node: Any, outcomes: Mapping[str, int]) -> bool:
+        """Whether the element's labels both assert and deny a predicate with ``outcomes`` (label ->
+        y): :func:`~sgbelief.fusion.rules.labels_contested`."""
+        held = self.counts.get(node)
+        return bool(held) and labels_contested(outcomes, held)  # type: ignore[arg-type]
 
     def hold(self, node: Any, predicate: str, outcomes: Mapping[str, int]) -> None:
         """An unadjudicated claim for phi (outcome table ``outcomes``) was applied at ``node``:

@@ -131,6 +131,41 @@ def recalled_outcome(outcomes: Mapping[str, int], label_counts: Mapping[str, int
     return None
 
 
+def labels_contested(outcomes: Mapping[str, int], label_counts: Mapping[str, int]) -> bool:
+    """Whether the channel contradicted itself about an element for phi (``contested_labels``, docs/method.md §8).
+
+        contested  iff  n_1 > 0 and n_0 > 0
+
+    with n_y the element's labels (so far, the claim's own frame included) that the vocabulary maps
+    to outcome y for phi (its ``outcomes`` table); labels that decide nothing are not counted. It is
+    the complement, among elements with both kinds of label, of :func:`recalled_outcome`'s unanimity:
+    where the channel has asserted phi of v in one frame and denied it in another, one of those
+    labels is its own error, and no single frame's label is taken as the truth about v.
+    """
+    pos = neg = False
+    for label in label_counts:
+        y = outcomes.get(label)
+        if y == 1:
+            pos = True
+        elif y == 0:
+            neg = True
+    return pos and neg
+
+
+def consensus_agrees(asserts: bool, posterior: float | None) -> bool:
+    """Whether the map-wide consensus sides with a claim (``contested_labels: consensus``, docs/method.md §8):
+
+        agrees  iff  q_v(phi) >= 1/2  for a claim asserting phi,   q_v(phi) < 1/2  for one denying it
+
+    with q_v(phi) the Dawid–Skene posterior of the last fit, which weighs the channel's labels of v
+    and the claims on v by the reliabilities learned from the whole map. No posterior (no fit yet,
+    or v not in it): False, the refusal stands.
+    """
+    if posterior is None:
+        return False
+    return posterior >= 0.5 if asserts else posterior < 0.5
+
+
 def support_stratum(n_prior_claims: int, n_strata: int) -> int:
     """The Mondrian support stratum of a claim: min(n, S - 1) for n earlier claims at (v, phi).
 

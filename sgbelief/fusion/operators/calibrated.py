@@ -30,6 +30,7 @@ from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_
     adjudication,
     claim_asserts,
     claim_increments,
+    consensus_agrees,
     consensus_cell,
     evidence_weight,
     exclusion_increments,
@@ -153,6 +154,12 @@ class CalibratedOperator(BaseOperator):
         return self.recalls_verdicts and self.config.recalled_verdicts == "retroactive"
 
     @property
+    def weighs_contested(self) -> bool:
+        """comod may weigh, not refuse, a claim its frame's label contradicts where the element's
+        labels both assert and deny the predicate (``contested_labels: weigh`` or ``consensus``)."""
+        return self.recalls_verdicts and self.config.contested_labels != "refuse"
+
+    @property
     def excludes_rivals(self) -> bool:
         """A committed claim also counts against the classes that exclude it (``exclusive_evidence: rivals``)."""
         return self.config.exclusive_evidence == "rivals" and self.vocabulary is not None
@@ -162,10 +169,13 @@ class CalibratedOperator(BaseOperator):
         """Property 2 holds exactly: no ⊥ event changes the belief at its (v, phi). True for a
         refusing operator that does not also observe the geometric label (``comod_paper``,
         ``geometric_evidence: none``) nor withdraw earlier claims (``recalled_verdicts:
-        retroactive``); with those a refused claim's own increments still never enter, but the
-        label's observation, or the withdrawal of the pair's earlier unseen claims (both against
-        the claim), does."""
-        return self.check_compatibility and not self.observes_geometry and not self.withdraws_unadjudicated
+        retroactive``) nor weigh claims at elements the channel contradicted itself about
+        (``contested_labels: weigh``); with the first two a refused claim's own increments still
+        never enter, but the label's observation, or the withdrawal of the pair's earlier unseen
+        claims (both against the claim), does; with the third a ⊥ claim at a contested element is
+        weighed, not refused."""
+        return self.check_compatibility and not self.observes_geometry and not self.withdraws_unadjudicated \
+            and not self.weighs_contested
 
     # ------------------------------------------------------------- time
     def _timeouts(self, graph: SceneGraphModel, t: int) -> list[QueueResolution]:
@@ -216,8 +226,10 @@ class CalibratedOperator(BaseOperator):
                 if recall_table is not None and y is None and recalled is None and channel is not None \
                         and self.withdraws_unadjudicated:  # (no channel: no label will ever judge it)
                     memory.hold(node, event.predicate, recall_table)  # type: ignore[union-attr]
+                contested = y is not None and recall_table is not None and self.weighs_contested \
+                    and memory.contested(node, recall_table)  # type: ignore[union-attr]
                 action, v, da, db, res = self._apply_target(graph, event, node, mass, y, verified, label, consensus,
-                                                            recalled)
+                                                            recalled, contested)
                 resolutions += res
                 tally[action] += 1
                 outcomes.append(TargetOutcome(node, mass, v, action, da, db))
@@ -234,11 +246,16 @@ class CalibratedOperator(BaseOperator):
     def _apply_target(
         self, graph: SceneGraphModel, event: EvidenceEvent, node: Any, mass: float, y: int | None,
         verified: list[tuple[int, str]], label: str | None = None, consensus: MapConsensus | None = None,
-        recalled: int | None = None,
+        recalled: int | None = None, contested: bool = False,
     ) -> tuple[Action, Verdict, float, float, list[QueueResolution]]:
         """Alg. 1 lines 4-19 for one target with T(v) > tau_T: (action, verdict, d_alpha, d_beta, resolutions).
         ``recalled``: the outcome the element's earlier labels agree on when this frame's label decides
-        nothing (only its ⊥ counts: the claim is refused; it is not a calibration outcome)."""
+        nothing (only its ⊥ counts: the claim is refused; it is not a calibration outcome).
+        ``contested``: the element's labels both assert and deny the predicate
+        (:func:`~sgbelief.fusion.rules.labels_contested`): a ⊥ of this frame's label is recorded
+        but, with ``contested_labels: weigh``, or ``consensus`` when the consensus sides with the
+        claim (:func:`~sgbelief.fusion.rules.consensus_agrees`), refuses nothing, and the claim is
+        weighed as ``cal`` weighs it."""
         cfg, prov, pred = self.config, graph.provenance, event.predicate
         n_strata = cfg.calibration.support_strata
         stratum = support_stratum(self._next_claim(prov, node, pred), n_strata)
@@ -261,7 +278,12 @@ class CalibratedOperator(BaseOperator):
                                         verdict=EntryVerdict.GEOMETRIC, confidence=c))
                 a, b = a + ga, b + gb
         da, db = claim_increments(lam, evidence_weight(cfg.w0, kappa, mass))  # Eq. 3
-        if self.check_compatibility and v is _CONTRA:  # refusal (Property 2)
+        if contested and v is _CONTRA and (cfg.contested_labels == "weigh" or consensus_agrees(
+                asserts, consensus.posterior(node, pred) if consensus is not None else None)):
+            contested = True  # the channel contradicted itself at v: this frame's label refuses nothing
+        else:
+            contested = False
+        if self.check_compatibility and v is _CONTRA and not contested:  # refusal (Property 2)
             stance = -1 if asserts else 1  # geometry's stance opposes the claim
             prov.append(EntryRecord(node=node, predicate=pred, event_id=event.id, t=event.t, d_alpha=da, d_beta=db,
                                     status=EntryStatus.REFUSED, stance=stance, verdict=code, confidence=c))
