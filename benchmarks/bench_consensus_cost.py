@@ -3,7 +3,7 @@
     python benchmarks/bench_consensus_cost.py [--suite outdoor] [--rounds 3] [--operator comod]
     python benchmarks/bench_consensus_cost.py --suite realistic [--detector ssd] [--channel none]
 
-Replays one simulated stream (vlm_a, oracle channel; with ``--suite realistic`` a cell of the
+Replays one simulated stream (vlm_a, oracle channel or ``--sim-channel segmenter``; with ``--suite realistic`` a cell of the
 realistic suite, by default SSD without a channel, where the consensus weighs every claim) under
 the operator with the shipped default
 configuration and with each mechanism of docs/method.md §8 switched off, rounds interleaved, and
@@ -29,6 +29,7 @@ CONFIGS = {
     "default, posterior outcomes only": {"calibration": {"consensus": {"adjudicated_elements": "consensus"}}},
     "default, independent emission (Dawid-Skene's)": {"calibration": {"consensus": {"emission": "multinomial"}}},
     "default, silent claims weighed at arrival only": {"calibration": {"consensus": {"silent_weights": "at_arrival"}}},
+    "default, contested claims refused": {"contested_labels": "refuse"},
     "consensus only": {"exclusive_evidence": "none"},
     "rivals only": {"calibration": {"consensus": {"method": "none"}}},
     "neither": {"exclusive_evidence": "none", "calibration": {"consensus": {"method": "none"}}},
@@ -40,6 +41,8 @@ def main() -> None:
     ap.add_argument("--suite", default="outdoor", choices=[*sorted(SUITES), "realistic"])
     ap.add_argument("--detector", default="ssd", help="with --suite realistic: rfcn or ssd")
     ap.add_argument("--channel", default="none", help="with --suite realistic: mesh, segmenter or none")
+    ap.add_argument("--sim-channel", default="oracle", choices=["oracle", "segmenter"],
+                    help="with --suite indoor or outdoor: the geometric channel (default %(default)s)")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--operator", default="comod")
     ap.add_argument("--seed", type=int, default=0)
@@ -51,9 +54,9 @@ def main() -> None:
         events, table = cell.events, cell.table
         label = f"realistic suite ({args.detector}, channel {args.channel})"
     else:
-        events = simulate(args.suite, args.seed).events_for("vlm_a", "oracle")
+        events = simulate(args.suite, args.seed).events_for("vlm_a", args.sim_channel)
         table = SubsumptionTable.shipped(SUITES[args.suite].vocab)
-        label = f"{args.suite} suite"
+        label = f"{args.suite} suite ({args.sim_channel} channel)"
     cost: dict[str, list[float]] = {k: [] for k in CONFIGS}
     for _ in range(args.rounds):
         for name, cfg in CONFIGS.items():
