@@ -195,7 +195,7 @@ def test_the_backend_turns_the_consensus_off_unless_configured_and_says_so():
     assert on.operator.consensus_classes == frozenset({"is_chair", "is_table", "is_sofa"})
     text = off.summary([]).format()
     assert ("operator: comod (geometric_evidence=label, consensus=none, exclusive_evidence=none, "
-            "recalled_verdicts=retroactive)") in text
+            "recalled_verdicts=retroactive, contested_labels=consensus)") in text
     assert off.summary([]).to_dict()["operator"]["consensus"] == "none"
 
 

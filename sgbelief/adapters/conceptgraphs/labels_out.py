@@ -360,6 +360,7 @@ class LabelReader:
             out["exclusive_evidence"] = str(cfg.exclusive_evidence)
             if getattr(op, "check_compatibility", False):  # refusing operators: the channel's earlier labels
                 out["recalled_verdicts"] = str(cfg.recalled_verdicts)
+                out["contested_labels"] = str(cfg.contested_labels)
         return out
 
 

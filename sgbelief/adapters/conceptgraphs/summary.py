@@ -60,7 +60,8 @@ class BackendSummary:
     channel: dict[str, Any] = field(default_factory=dict)
     vocabulary: str = ""  #: the vocabulary's name (its class list, or the table)
     #: the operator and the settings that decide what a claim with no channel outcome does:
-    #: {"name", "geometric_evidence", "consensus", "exclusive_evidence", "recalled_verdicts"} (those it has)
+    #: {"name", "geometric_evidence", "consensus", "exclusive_evidence", "recalled_verdicts",
+    #: "contested_labels"} (those it has)
     operator: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
