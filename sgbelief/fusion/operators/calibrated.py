@@ -170,7 +170,7 @@ class CalibratedOperator(BaseOperator):
         refusing operator that does not also observe the geometric label (``comod_paper``,
         ``geometric_evidence: none``) nor withdraw earlier claims (``recalled_verdicts:
         retroactive``) nor weigh claims at elements the channel contradicted itself about
-        (``contested_labels: weigh``); with the first two a refused claim's own increments still
+        (``contested_labels: weigh`` or ``consensus``); with the first two a refused claim's own increments still
         never enter, but the label's observation, or the withdrawal of the pair's earlier unseen
         claims (both against the claim), does; with the third a ⊥ claim at a contested element is
         weighed, not refused."""
@@ -278,12 +278,10 @@ class CalibratedOperator(BaseOperator):
                                         verdict=EntryVerdict.GEOMETRIC, confidence=c))
                 a, b = a + ga, b + gb
         da, db = claim_increments(lam, evidence_weight(cfg.w0, kappa, mass))  # Eq. 3
-        if contested and v is _CONTRA and (cfg.contested_labels == "weigh" or consensus_agrees(
-                asserts, consensus.posterior(node, pred) if consensus is not None else None)):
-            contested = True  # the channel contradicted itself at v: this frame's label refuses nothing
-        else:
-            contested = False
-        if self.check_compatibility and v is _CONTRA and not contested:  # refusal (Property 2)
+        # the channel contradicted itself at v: this frame's label refuses nothing (contested_labels)
+        weighed = contested and v is _CONTRA and (cfg.contested_labels == "weigh" or consensus_agrees(
+            asserts, consensus.posterior(node, pred) if consensus is not None else None))
+        if self.check_compatibility and v is _CONTRA and not weighed:  # refusal (Property 2)
             stance = -1 if asserts else 1  # geometry's stance opposes the claim
             prov.append(EntryRecord(node=node, predicate=pred, event_id=event.id, t=event.t, d_alpha=da, d_beta=db,
                                     status=EntryStatus.REFUSED, stance=stance, verdict=code, confidence=c))
