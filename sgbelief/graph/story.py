@@ -348,5 +348,7 @@ def render_story(story: BeliefStory, limit: int = 40) -> list[str]:
 
 #: the key under the tables
 STORY_KEY = ("v: verdict (⊤ corroborated, ⊥ contradicted, ∅ no geometric claim, geo: the geometric label "
-             "observed as evidence, exc: a claim of an exclusive rival class, counted against); c: the event's "
-             "confidence; Λ̂: calibrated likelihood ratio; w·T(v): weight; ±: stance; · = not recorded")
+             "observed as evidence, exc: a claim of an exclusive rival class, counted against; a ⊥ claim that is "
+             "committed was weighed, not refused: the element's labels had both asserted and denied the predicate, "
+             "contested_labels); c: the event's confidence; Λ̂: calibrated likelihood ratio; w·T(v): weight; "
+             "±: stance; · = not recorded")
