@@ -193,9 +193,12 @@ def test_the_backend_turns_the_consensus_off_unless_configured_and_says_so():
     on = ConceptGraphsBackend("comod", class_names=CLASSES, print_summary=False,
                               operator_config={"calibration": {"consensus": {"method": "dawid_skene"}}})
     assert on.operator.consensus_classes == frozenset({"is_chair", "is_table", "is_sofa"})
+    # with the consensus off, the contested labels' consensus gate has nothing to ask: the backend says refuse
+    assert off.operator.config.contested_labels == "refuse"
+    assert on.operator.config.contested_labels == "consensus"
     text = off.summary([]).format()
     assert ("operator: comod (geometric_evidence=label, consensus=none, exclusive_evidence=none, "
-            "recalled_verdicts=retroactive, contested_labels=consensus)") in text
+            "recalled_verdicts=retroactive, contested_labels=refuse)") in text
     assert off.summary([]).to_dict()["operator"]["consensus"] == "none"
 
 

@@ -344,6 +344,10 @@ def _with_geometric_evidence(config: Any, geometric_evidence: str | None) -> Any
         cal = base.calibration.model_dump()
         cal["consensus"] = {**cal["consensus"], "method": "none"}
         update["calibration"] = cal
+        if "contested_labels" not in own and base.contested_labels == "consensus":
+            # with no consensus to ask, contested_labels: consensus refuses every contradicted claim:
+            # say so in the settings the summary prints
+            update["contested_labels"] = "refuse"
     if not update:
         return base
     return OperatorConfig.from_mapping({**base.model_dump(), **update},
