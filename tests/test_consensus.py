@@ -118,6 +118,32 @@ def test_element_outcomes_count_the_channel_labels_per_class() -> None:
     assert off.outcomes is None
 
 
+def test_posterior_reads_the_last_fit() -> None:
+    """``MapConsensus.posterior``: None before any fit and for an element or a class the last fit
+    did not hold; otherwise the fit's q_v(phi), merged elements reading their representative's row;
+    claims added after the fit do not move it until the next one."""
+    table = _table()
+    cons = MapConsensus(OperatorConfig().calibration, frozenset(table.exclusive_predicates()),
+                        table.asserted_tables(), table.outcome_tables())
+    cons.add_claim("a", "is_tv", "det", 0.9, "cell", False, "e1")
+    cons.add_claim("a", "is_tv", "det", 0.8, "cell", False, "e2")
+    cons.add_claim("b", "is_bed", "det", 0.6, "cell", False, "e3")
+    assert cons.posterior("a", "is_tv") is None  # no fit yet
+    cons.refit()
+    probas = cons.ds_.probas_
+    assert cons.posterior("a", "is_tv") == pytest.approx(probas[cons.task_of("a"), cons.class_of("is_tv")])
+    assert cons.posterior("b", "is_tv") == pytest.approx(probas[cons.task_of("b"), cons.class_of("is_tv")])
+    assert cons.posterior("z", "is_tv") is None  # never claimed
+    assert cons.posterior("a", "is_chair") is None  # a class the fit did not hold
+    before = cons.posterior("a", "is_tv")
+    cons.add_claim("a", "is_bed", "det", 0.9, "cell", False, "e4")
+    cons.add_claim("c", "is_tv", "det", 0.9, "cell", False, "e5")
+    assert cons.posterior("a", "is_tv") == before and cons.posterior("c", "is_tv") is None
+    cons.merge_elements("a", "b")
+    cons.refit()
+    assert cons.posterior("b", "is_tv") == pytest.approx(cons.posterior("a", "is_tv"))
+
+
 def _monitor_stream(seed: int, n: int = 12, claims: int = 30, see: float = 0.15):
     """TVs (channel label tv) and monitors (channel label otherprop, which denies is_tv in an
     exhaustive table), each claimed 'tv' ``claims`` times at the same confidences; the channel sees
