@@ -34,6 +34,12 @@ def _table() -> SubsumptionTable:
     return SubsumptionTable(specs, name="five", labels=[*CLASSES, "otherprop"])
 
 
+def _map_consensus(table: SubsumptionTable, config: OperatorConfig | None = None) -> MapConsensus:
+    """A map's consensus over ``table``'s exclusive classes, as the operator builds it."""
+    return MapConsensus((config or OperatorConfig()).calibration, frozenset(table.exclusive_predicates()),
+                        table.asserted_tables(), table.outcome_tables())
+
+
 # ----------------------------------------------------------------------------- step functions
 def test_adjudication_standing_and_cell_by_hand() -> None:
     assert adjudication("chair", 1) == "decisive"
@@ -97,8 +103,7 @@ def test_element_outcomes_count_the_channel_labels_per_class() -> None:
     """Per (element, class): labels that decide the class and those that corroborate it, merged
     elements counted as one; a label that decides nothing (otherprop here) counts for neither."""
     table = _table()
-    cons = MapConsensus(OperatorConfig().calibration, frozenset(table.exclusive_predicates()),
-                        table.asserted_tables(), table.outcome_tables())
+    cons = _map_consensus(table)
     cons.add_claim("a", "is_tv", "det", 0.7, "cell", False, "e1")
     cons.add_claim("b", "is_bed", "det", 0.7, "cell", False, "e2")
     cons.add_claim("c", "is_tv", "det", 0.7, "cell", False, "e3")
@@ -113,8 +118,7 @@ def test_element_outcomes_count_the_channel_labels_per_class() -> None:
     assert (n_pos[a, tv], n_dec[a, tv]) == (2, 3)  # tv, tv for; chair against; otherprop silent
     assert (n_pos[a, bed], n_dec[a, bed]) == (0, 3)
     assert (n_pos[b, bed], n_dec[b, bed], n_pos[b, tv], n_dec[b, tv]) == (1, 1, 0, 1)
-    off = MapConsensus(OperatorConfig(calibration={"consensus": {"adjudicated_elements": "consensus"}}).calibration,
-                       frozenset(table.exclusive_predicates()), table.asserted_tables(), table.outcome_tables())
+    off = _map_consensus(table, OperatorConfig(calibration={"consensus": {"adjudicated_elements": "consensus"}}))
     assert off.outcomes is None
 
 
@@ -123,8 +127,7 @@ def test_posterior_reads_the_last_fit() -> None:
     did not hold; otherwise the fit's q_v(phi), merged elements reading their representative's row;
     claims added after the fit do not move it until the next one."""
     table = _table()
-    cons = MapConsensus(OperatorConfig().calibration, frozenset(table.exclusive_predicates()),
-                        table.asserted_tables(), table.outcome_tables())
+    cons = _map_consensus(table)
     cons.add_claim("a", "is_tv", "det", 0.9, "cell", False, "e1")
     cons.add_claim("a", "is_tv", "det", 0.8, "cell", False, "e2")
     cons.add_claim("b", "is_bed", "det", 0.6, "cell", False, "e3")
