@@ -104,6 +104,13 @@ class SgbeliefDeprecationWarning(SgbeliefWarning, DeprecationWarning):
     """A name that moved or is going away; the message says where it lives now."""
 
 
+class LowConfidenceWarning(SgbeliefWarning):
+    """Most claims carry a confidence below 0.5 and nothing can calibrate them (no geometric
+    channel): sgbelief reads a confidence as the probability that the claim is right, so each such
+    claim counts against its class and objects are left unknown. The message gives the counts and
+    what to pass instead."""
+
+
 class InputMismatchWarning(SgbeliefWarning):
     """Two input files only partly describe the same map (a truth or nodes file that covers some
     of the nodes an evidence log targets): the message gives the counts."""

@@ -41,6 +41,7 @@ _EXPORTS = {
     "PointCloudChannel": "sgbelief.adapters.conceptgraphs.channels",
     "scannet_mesh_channel": "sgbelief.adapters.conceptgraphs.channels",
     "LabelImageChannel": "sgbelief.fusion.channel",
+    "LowConfidenceWarning": "sgbelief.errors",
 }
 
 __all__ = sorted(_EXPORTS)

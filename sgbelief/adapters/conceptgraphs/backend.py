@@ -234,8 +234,9 @@ class ConceptGraphsBackend(MapBeliefs):
 
     def end_frame(self) -> None:
         """Called by the patched per-frame merge functions: the per-frame housekeeping hook (the
-        frame's queued events applied, then the garbage-collector checkpoint if enabled)."""
-        self.flush()
+        frame's queued events applied and :meth:`MapBeliefs.end_frame`'s checks, then the
+        garbage-collector checkpoint if enabled)."""
+        super().end_frame()
         if self.gc_checkpoints:
             self.gc_checkpoint()
 

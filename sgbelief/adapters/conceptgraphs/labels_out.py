@@ -13,7 +13,7 @@ from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClassSummary
+from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClassSummary, low_confidence_note
 from sgbelief.adapters.conceptgraphs.vocab import normalise_class_name
 from sgbelief.fusion.operators.calibrated import CalibratedOperator
 from sgbelief.fusion.rules import exclusive_marginal
@@ -44,6 +44,7 @@ class LabelReader:
     _label_preds_per_node: dict[Any, set[str]]
     _labels_per_node: dict[Any, Counter[str]]
     _claim_counts: dict[str, Any]
+    _claims_below_half: int
     _has_channel: bool
     _routed_detections: int
 
@@ -326,7 +327,10 @@ class LabelReader:
                 differing.append({"node": str(n), "vote": vote, "label": written,
                                   "why": _why(hit is None, written, counts, routed)})
         vocab = self.vocabulary
+        n_claims = sum(c.claims for c in self._claim_counts.values())
+        note = low_confidence_note(n_claims, self._claims_below_half, self._has_channel)
         return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
+                              below_half=self._claims_below_half, notes=[] if note is None else [note],
                               filtered=filtered, detections=self._routed_detections,
                               events=self.evidence_count(),
                               classes={k: ClassSummary(**v) for k, v in sorted(per_class.items())},

@@ -5,6 +5,7 @@ they are swapped in (:mod:`.generation_main`, :mod:`.generation_ali_dev`, :mod:`
 from __future__ import annotations
 
 import contextlib
+import warnings
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Any
@@ -22,8 +23,14 @@ from sgbelief.adapters.conceptgraphs.geometry import geometry_summary
 from sgbelief.adapters.conceptgraphs.identity import IdentityMap
 from sgbelief.adapters.conceptgraphs.labels_out import LabelReader
 from sgbelief.adapters.conceptgraphs.new_objects import NewObjectRegistration
-from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClaimCounts
+from sgbelief.adapters.conceptgraphs.summary import (
+    LOW_CONFIDENCE_MIN_CLAIMS,
+    BackendSummary,
+    ClaimCounts,
+    low_confidence_note,
+)
 from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
+from sgbelief.errors import LowConfidenceWarning
 
 __all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "DetectionLabelFn", "MapBeliefs"]
 
@@ -134,6 +141,11 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
         self._seeded: set[Any] = set()
         #: per detector class name: claims and what the channel said of them (summary())
         self._claim_counts: dict[str, ClaimCounts] = {}
+        #: claims counted with a confidence below 0.5 (evidence against their class), and whether
+        #: the user was told that most claims are (LowConfidenceWarning, once)
+        self._claims_below_half = 0
+        self._claims_counted = 0
+        self._low_confidence_warned = False
         #: a channel is configured (or a detection carried its own label): checked within 20 frames
         self._has_channel = self.channel is not None or self.channel_fn is not None
         self._detections_per_node: Counter[Any] = Counter()
@@ -350,6 +362,9 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
         if counts is None:
             counts = self._claim_counts[class_name] = ClaimCounts()
         counts.claims += 1
+        self._claims_counted += 1
+        if conf < 0.5:
+            self._claims_below_half += 1
         if not answers:
             counts.unverifiable += 1
             return
@@ -525,8 +540,16 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
         """Called by the patched per-frame merge functions once per frame (after the merge).
 
         Applies the frame's queued events; :class:`~sgbelief.adapters.conceptgraphs.backend.
-        ConceptGraphsBackend` adds its garbage-collector checkpoints here."""
+        ConceptGraphsBackend` adds its garbage-collector checkpoints here. Warns once
+        (:class:`~sgbelief.errors.LowConfidenceWarning`) when most claims so far have a confidence
+        below 0.5 and no channel can calibrate them."""
         self.flush()
+        if not self._low_confidence_warned and not self._has_channel:
+            note = low_confidence_note(self._claims_counted, self._claims_below_half, self._has_channel,
+                                       LOW_CONFIDENCE_MIN_CLAIMS)
+            if note is not None:
+                self._low_confidence_warned = True
+                warnings.warn(f"ConceptGraphsBackend: {note}", LowConfidenceWarning, stacklevel=2)
 
     def evidence_count(self) -> int:
         self.flush()

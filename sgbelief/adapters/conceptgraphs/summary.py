@@ -12,7 +12,30 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-__all__ = ["BackendSummary", "ClassSummary", "ClaimCounts"]
+__all__ = ["BackendSummary", "ClassSummary", "ClaimCounts", "LOW_CONFIDENCE_MIN_CLAIMS", "low_confidence_note"]
+
+#: claims routed before :func:`low_confidence_note` judges their confidences
+LOW_CONFIDENCE_MIN_CLAIMS = 100
+
+
+def low_confidence_note(claims: int, below_half: int, has_channel: bool, min_claims: int = 1) -> str | None:
+    """What to tell the user when at least half of ``claims`` (and at least ``min_claims``) have a
+    confidence below 0.5 and no geometric channel is configured; None otherwise.
+
+    sgbelief reads a claim's confidence c as the probability that it is right (the cold start of
+    docs/method.md §4.1 until outcomes calibrate it), so a claim with c < 0.5 is evidence *against*
+    its class. Detectors whose scores are not probabilities (open-vocabulary detectors report
+    0.2-0.5 for detections that are mostly right) then leave most objects unknown, and a channel is
+    the only source of outcomes the backend has to calibrate them on."""
+    # every condition evaluated (no short circuit): a frame's check costs the same whatever the map
+    applies = (not has_channel) & (claims >= max(1, min_claims)) & (2 * below_half >= claims)
+    if not applies:
+        return None
+    return (f"{below_half} of {claims} claims have a confidence below 0.5 and no geometric channel can calibrate them: "
+            "sgbelief reads a confidence as the probability that the claim is right, so each of those counts "
+            "against its class and objects are left unknown. If this detector's scores are not probabilities, "
+            "give the backend a label channel (channel=LabelImageChannel(...)), or confidence_map= a map from "
+            "its scores to the probability of being right (fitted on annotated frames)")
 
 
 class ClaimCounts:
@@ -63,6 +86,10 @@ class BackendSummary:
     #: {"name", "geometric_evidence", "consensus", "exclusive_evidence", "recalled_verdicts",
     #: "contested_labels"} (those it has)
     operator: dict[str, str] = field(default_factory=dict)
+    #: claims whose confidence (after ``confidence_map``) is below 0.5: each counts against its class
+    below_half: int = 0
+    #: what the user should know about the run (e.g. :func:`low_confidence_note`)
+    notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (what the backend writes beside a saved map)."""
@@ -94,6 +121,7 @@ class BackendSummary:
         if self.operator:
             rest = ", ".join(f"{k}={v}" for k, v in self.operator.items() if k != "name")
             lines.append(f"operator: {self.operator.get('name', '?')}" + (f" ({rest})" if rest else ""))
+        lines.extend(f"note: {n}" for n in self.notes)
         if self.channel:
             unmatched = self.channel.get("unmatched") or {}
             lines.append(f"channel: {self.channel.get('labels', 0)} labels, {self.channel.get('matched', 0)} matched"
