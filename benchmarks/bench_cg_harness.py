@@ -49,10 +49,14 @@ def main(argv: list[str] | None = None) -> int:
                          "10 with 25 at 128x96 or 192x144, 19 with 150 at 128x96, 29 with 200 at 192x144); label "
                          "accuracy is only comparable at 0")
     ap.add_argument("--size", default="128x96", help="rendered image size WxH (default %(default)s)")
-    ap.add_argument("--confidences", default="uniform", choices=["uniform", "rfcn", "ssd"],
-                    help="the detector's confidences: uniform whether its class is right or not (default), or "
+    ap.add_argument("--confidences", default="uniform", choices=H.CONFIDENCE_CHOICES,
+                    help="the detector's confidences: uniform whether its class is right or not (default), "
                          "drawn from a shipped detector's matched / unmatched records (confidences that carry "
-                         "information)")
+                         "information), or scores that are not probabilities (low, low_informative: mostly below "
+                         "0.5, as open-vocabulary detectors report them)")
+    ap.add_argument("--score-map", type=int, default=0, metavar="N",
+                    help="give the backend confidence_map=ScoreCalibration.fit(...) on N annotated detections of "
+                         "the same detector (its own frames, another generator); 0: none (default)")
     ap.add_argument("--json", default=None, help="write the results here")
     args = ap.parse_args(argv)
     if not args.cg:
@@ -81,9 +85,20 @@ def main(argv: list[str] | None = None) -> int:
                         "miou": vote.miou, "objects": vote.n_objects, "fusion_ms": float(np.mean(vote.fusion_ms))})
     if args.objects:
         out["runs"][-1].update(_per_frame(vote))
+    score_map = None
+    if args.score_map:
+        from sgbelief.calibration.scores import ScoreCalibration
+
+        scores, right = H.annotated_detections(world, args.score_map, args.seed)
+        score_map = ScoreCalibration.fit(scores, right)
+        print(f"[{gen}] confidence_map: ScoreCalibration on {args.score_map} annotated detections "
+              f"({right.mean():.2f} right; p(0.3) = {score_map(0.3):.2f}, p(0.5) = {score_map(0.5):.2f}, "
+              f"p(0.8) = {score_map(0.8):.2f})")
+    out["score_map"] = args.score_map
     for ch in [c for c in args.channels.split(",") if c]:
         t0 = time.perf_counter()
-        backend = H.make_backend(args.operator, H.make_channel(world, ch), operator_config=args.operator_config)
+        backend = H.make_backend(args.operator, H.make_channel(world, ch), operator_config=args.operator_config,
+                                 confidence_map=score_map)
         own = None
         if args.cpu_time:
             backend.event_log = []  # the run's events, replayed below

@@ -159,8 +159,11 @@ class Detections:
 
 #: where the detector's confidences come from: "uniform" (U(0.55, 0.97) whether the class is right or
 #: not: confidences that carry no information), or a shipped detector's records ("rfcn", "ssd"): a
-#: right class draws a score of that detector's matched records, a wrong one of its unmatched ones
+#: right class draws a score of that detector's matched records, a wrong one of its unmatched ones;
+#: or scores that are not probabilities, as open-vocabulary detectors report them: "low" (U(0.15,
+#: 0.55) whether right or not) and "low_informative" (U(0.3, 0.6) when right, U(0.1, 0.45) when not)
 CONFIDENCES = ["uniform"]
+CONFIDENCE_CHOICES = ["uniform", "rfcn", "ssd", "low", "low_informative"]
 _SCORE_POOLS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
 
@@ -175,8 +178,13 @@ def _score_pools(name: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _confidence(rng: np.random.Generator, right: bool) -> float:
-    if CONFIDENCES[0] == "uniform":
+    mode = CONFIDENCES[0]
+    if mode == "uniform":
         return float(rng.uniform(0.55, 0.97))
+    if mode == "low":
+        return float(rng.uniform(0.15, 0.55))
+    if mode == "low_informative":
+        return float(rng.uniform(0.3, 0.6)) if right else float(rng.uniform(0.1, 0.45))
     matched, unmatched = _score_pools(CONFIDENCES[0])
     pool = matched if right else unmatched
     return float(pool[rng.integers(len(pool))])
@@ -636,7 +644,25 @@ def _miou(objects: Any, labels: list[str], truth: list[int], world: World) -> fl
     return float(np.mean([tp[c] / max(tp[c] + fp[c] + fn[c], 1) for c in gts]))
 
 
-def make_backend(operator: str, channel: Any, *, operator_config: Any = None) -> Any:
+def annotated_detections(world: World, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` detections of the harness's detector with their correctness, as a user would annotate
+    a few frames to fit ``ScoreCalibration`` (drawn from frames cycled in order, with their own
+    generator: not the run's detections)."""
+    rng = np.random.default_rng(seed + 7919)
+    feats = features(world)
+    scores: list[float] = []
+    right: list[bool] = []
+    k = 0
+    while len(scores) < n:
+        d = detect(world, k % len(world.frames), rng, feats=feats)
+        for cid, conf, obj in zip(d.gobs["class_id"], d.gobs["confidence"], d.truth):
+            scores.append(float(conf))
+            right.append(world.classes[int(cid)] == world.objects[obj][0])
+        k += 1
+    return np.asarray(scores[:n]), np.asarray(right[:n])
+
+
+def make_backend(operator: str, channel: Any, *, operator_config: Any = None, confidence_map: Any = None) -> Any:
     """The backend built exactly as the README shows: an operator name, a context, a channel (and an
     operator config only when an experiment names one). No vocabulary and no class list: the
     backend learns the class list from ConceptGraphs (the ``class_names`` the run hands
@@ -645,4 +671,6 @@ def make_backend(operator: str, channel: Any, *, operator_config: Any = None) ->
     from sgbelief.adapters.conceptgraphs import ConceptGraphsBackend
 
     extra = {} if operator_config is None else {"operator_config": operator_config}
+    if confidence_map is not None:
+        extra["confidence_map"] = confidence_map
     return ConceptGraphsBackend(operator, context="harness-detector", channel=channel, **extra)

@@ -34,8 +34,9 @@ def low_confidence_note(claims: int, below_half: int, has_channel: bool, min_cla
     return (f"{below_half} of {claims} claims have a confidence below 0.5 and no geometric channel can calibrate them: "
             "sgbelief reads a confidence as the probability that the claim is right, so each of those counts "
             "against its class and objects are left unknown. If this detector's scores are not probabilities, "
-            "give the backend a label channel (channel=LabelImageChannel(...)), or confidence_map= a map from "
-            "its scores to the probability of being right (fitted on annotated frames)")
+            "give the backend a label channel (channel=LabelImageChannel(...)), or a map from its scores to the "
+            "probability of being right fitted on annotated detections: confidence_map="
+            "sgbelief.calibration.scores.ScoreCalibration.fit(scores, correct)")
 
 
 class ClaimCounts:
