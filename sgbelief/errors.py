@@ -104,6 +104,22 @@ class SgbeliefDeprecationWarning(SgbeliefWarning, DeprecationWarning):
     """A name that moved or is going away; the message says where it lives now."""
 
 
+def warn_at_caller(message: str, category: type[Warning]) -> None:
+    """``warnings.warn`` attributed to the first frame outside the sgbelief package (the user's
+    script, or ConceptGraphs' loop around a patched function), not to the line inside sgbelief
+    that noticed the condition."""
+    import inspect
+    import os
+    import warnings
+
+    package = os.path.dirname(os.path.abspath(__file__)) + os.sep
+    frame, level = inspect.currentframe(), 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(package):
+        frame, level = frame.f_back, level + 1
+    del frame
+    warnings.warn(message, category, stacklevel=level)
+
+
 class LowConfidenceWarning(SgbeliefWarning):
     """Most claims carry a confidence below 0.5 and nothing can calibrate them (no geometric
     channel): sgbelief reads a confidence as the probability that the claim is right, so each such

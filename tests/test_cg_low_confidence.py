@@ -48,8 +48,9 @@ def test_a_run_of_low_confidences_warns_once_at_a_frame_end_and_the_summary_note
         warnings.simplefilter("error", LowConfidenceWarning)
         backend.end_frame()  # 99 claims: too few to judge
     _route(backend, [0.3])
-    with pytest.warns(LowConfidenceWarning, match=f"{LOW_CONFIDENCE_MIN_CLAIMS} of {LOW_CONFIDENCE_MIN_CLAIMS} claims"):
+    with pytest.warns(LowConfidenceWarning, match=f"{LOW_CONFIDENCE_MIN_CLAIMS} of {LOW_CONFIDENCE_MIN_CLAIMS} claims") as rec:
         backend.end_frame()
+    assert rec[0].filename == __file__  # attributed to the caller outside sgbelief (errors.warn_at_caller)
     with warnings.catch_warnings():
         warnings.simplefilter("error", LowConfidenceWarning)
         backend.end_frame()  # once

@@ -5,7 +5,6 @@ they are swapped in (:mod:`.generation_main`, :mod:`.generation_ali_dev`, :mod:`
 from __future__ import annotations
 
 import contextlib
-import warnings
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Any
@@ -30,7 +29,7 @@ from sgbelief.adapters.conceptgraphs.summary import (
     low_confidence_note,
 )
 from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
-from sgbelief.errors import LowConfidenceWarning
+from sgbelief.errors import LowConfidenceWarning, warn_at_caller
 
 __all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "DetectionLabelFn", "MapBeliefs"]
 
@@ -549,7 +548,7 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
                                        LOW_CONFIDENCE_MIN_CLAIMS)
             if note is not None:
                 self._low_confidence_warned = True
-                warnings.warn(f"ConceptGraphsBackend: {note}", LowConfidenceWarning, stacklevel=2)
+                warn_at_caller(f"ConceptGraphsBackend: {note}", LowConfidenceWarning)
 
     def evidence_count(self) -> int:
         self.flush()
