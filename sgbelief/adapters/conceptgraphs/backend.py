@@ -67,7 +67,11 @@ class ConceptGraphsBackend(MapBeliefs):
             the claimed class of highest probability instead (every object gets a class).
         tau / tau_t: commit threshold and targeting-mass threshold (default: the operator config).
         on_filter: ``"mark"`` (node kept with ``cg_filtered=True``) or ``"remove"``.
-        confidence_map: optional map of the detector's raw confidence before it enters an event.
+        confidence_map: optional map of the detector's raw confidence before it enters an event:
+            sgbelief reads a confidence as the probability that the detection is right, so for a
+            detector whose scores are not, :class:`~sgbelief.calibration.scores.ScoreCalibration`
+            fitted on annotated detections (a run with most claims below 0.5 and no channel warns,
+            :class:`~sgbelief.errors.LowConfidenceWarning`).
         class_names: the run's class list, by class id, or its file / shipped name (``"replica"``,
             ``"scannet200"``) (default: the list ConceptGraphs loads).
         taxonomy: the taxonomy of synonyms / groups / hypernyms the open vocabulary uses
