@@ -108,3 +108,32 @@ def test_other_globals_refused(tmp_path, target):
 
     with pytest.raises(UnsafePickleError):
         restricted_loads(data)
+
+
+def test_import_with_a_confidence_map_reads_scores_as_probabilities(tmp_path, capsys):
+    """--confidence-map: a ScoreCalibration saved with to_dict() maps each detection's score before
+    it enters the event. A map sending every score to 0.9 commits both objects' classes that the raw
+    scores leave below (scores 0.3-0.45 are evidence against, sgbelief's reading); a file that is not a
+    calibration is refused, naming the file and the field."""
+    from sgbelief.calibration.scores import ScoreCalibration
+
+    results = {"objects": [saved_object([0, 0, 0], [0.3, 0.4, 0.45], [0, 1, 2], seed=1),
+                           saved_object([1, 1], [0.35, 0.4], [1, 2], seed=2)],
+               "bg_objects": None, "cfg": {}, "class_names": ["chair", "table"]}
+    src = tmp_path / "full_pcd_low.pkl.gz"
+    with gzip.open(src, "wb") as f:
+        pickle.dump(results, f)
+    cal = ScoreCalibration(scores=(0.0, 1.0), probabilities=(0.9, 0.9), n=100)
+    (tmp_path / "map.json").write_text(json.dumps(cal.to_dict()))
+    for name, extra in (("raw", []), ("mapped", ["--confidence-map", str(tmp_path / "map.json")])):
+        assert cli_main(["import-cg", str(src), "--out", str(tmp_path / name), *extra]) == 0
+    raw = json.loads((tmp_path / "raw" / "labels.json").read_text())
+    mapped = json.loads((tmp_path / "mapped" / "labels.json").read_text())
+    assert [raw[k]["belief"] for k in ("cg-0", "cg-1")] == ["unknown", "unknown"]
+    assert [mapped[k]["belief"] for k in ("cg-0", "cg-1")] == ["chair", "table"]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({**cal.to_dict(), "scores": [1.0, 0.0]}))
+    capsys.readouterr()
+    assert cli_main(["import-cg", str(src), "--out", str(tmp_path / "x"), "--confidence-map", str(bad)]) == 1
+    err = capsys.readouterr().err
+    assert "--confidence-map" in err and "bad.json" in err and "strictly ascending" in err

@@ -28,6 +28,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--first-pose", default=None,
                         help="with --channel: the pose file of the map's frame 0 (default SCENE_DIR/pose/0.txt "
                              "if present; 'none': the map is in the mesh frame)")
+    parser.add_argument("--confidence-map", default=None, metavar="JSON",
+                        help="the detector's scores mapped to probabilities: a ScoreCalibration saved with "
+                             "to_dict() (sgbelief.calibration.scores; for a detector whose scores are not "
+                             "probabilities) (default: the scores as they are)")
     parser.add_argument("--graph-format", choices=["json", "npz"], default="json",
                         help="save the graph as graph.json (default) or graph.npz (binary layout for large maps)")
 
@@ -43,12 +47,15 @@ def run(args: argparse.Namespace) -> int:
 
         first = False if (args.first_pose or "").lower() == "none" else args.first_pose
         channel = scannet_mesh_channel(args.channel, first_pose=first)
+    confidence_map = None
+    if args.confidence_map is not None:
+        confidence_map = _read_confidence_map(Path(args.confidence_map))
     merge: bool | list[str] = False
     if args.merge:
         merge = True if args.merge.strip().lower() == "all" else [m.strip() for m in args.merge.split(",") if m.strip()]
     backend = ConceptGraphsBackend(args.operator, vocabulary=args.vocab, context=args.context,
                                    operator_config=args.operator_config, channel=channel, merge=merge,
-                                   print_summary=False)
+                                   confidence_map=confidence_map, print_summary=False)
     with console.progress(desc="import-cg", unit="det") as bar:
         def advance(done: int, total: int) -> None:
             bar.total = total
@@ -69,3 +76,27 @@ def run(args: argparse.Namespace) -> int:
     print(report.format())
     print(f"wrote {graph_path}, {out / 'labels.json'} and {out / 'summary.json'}")
     return 0
+
+
+def _read_confidence_map(path: Path) -> object:
+    """A ScoreCalibration from its JSON file; a file that is not one raises ConfigError naming it."""
+    from pydantic import ValidationError
+
+    from sgbelief.calibration.scores import ScoreCalibration
+    from sgbelief.errors import ConfigError
+
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"--confidence-map {path}: cannot read a JSON score calibration: {exc}") from exc
+    if not isinstance(data, dict):
+        raise ConfigError(f"--confidence-map {path}: expected a JSON object (ScoreCalibration.to_dict()), "
+                          f"got {type(data).__name__}")
+    try:
+        return ScoreCalibration.from_dict(data)
+    except ValidationError as exc:
+        fields = "; ".join((f"field {'.'.join(str(x) for x in e['loc'])}: " if e["loc"] else "")
+                           + e["msg"].removeprefix("Value error, ") for e in exc.errors())
+        raise ConfigError(f"--confidence-map {path}: {fields}") from exc
+    except ValueError as exc:
+        raise ConfigError(f"--confidence-map {path}: {exc}") from exc

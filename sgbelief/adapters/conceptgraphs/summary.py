@@ -36,7 +36,8 @@ def low_confidence_note(claims: int, below_half: int, has_channel: bool, min_cla
             "against its class and objects are left unknown. If this detector's scores are not probabilities, "
             "give the backend a label channel (channel=LabelImageChannel(...)), or a map from its scores to the "
             "probability of being right fitted on annotated detections: confidence_map="
-            "sgbelief.calibration.scores.ScoreCalibration.fit(scores, correct)")
+            "sgbelief.calibration.scores.ScoreCalibration.fit(scores, correct) (sgbelief import-cg: --channel, "
+            "--confidence-map)")
 
 
 class ClaimCounts:
