@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sgbelief.cli import _console as console
+
+if TYPE_CHECKING:
+    from sgbelief.calibration.scores import ScoreCalibration
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -78,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _read_confidence_map(path: Path) -> object:
+def _read_confidence_map(path: Path) -> ScoreCalibration:
     """A ScoreCalibration from its JSON file; a file that is not one raises ConfigError naming it."""
     from pydantic import ValidationError
 

@@ -23,7 +23,7 @@ def low_confidence_note(claims: int, below_half: int, has_channel: bool, min_cla
     confidence below 0.5 and no geometric channel is configured; None otherwise.
 
     sgbelief reads a claim's confidence c as the probability that it is right (the cold start of
-    docs/method.md §4.1 until outcomes calibrate it), so a claim with c < 0.5 is evidence *against*
+    docs/method.md §4 until outcomes calibrate it), so a claim with c < 0.5 is evidence *against*
     its class. Detectors whose scores are not probabilities (open-vocabulary detectors report
     0.2-0.5 for detections that are mostly right) then leave most objects unknown, and a channel is
     the only source of outcomes the backend has to calibrate them on."""
