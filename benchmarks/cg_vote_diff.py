@@ -1,8 +1,8 @@
 """Where the backend's labels differ from ConceptGraphs' vote in ConceptGraphs' own loop, and why.
 
     SGBELIEF_CONCEPTGRAPH_PATH=<concept-graphs, main or ali-dev> PYTHONPATH=$PWD \\
-        python benchmarks/cg_vote_diff.py --seeds 0-9 [--confidences uniform|rfcn|ssd] [--channel none] \\
-        [--vote-run] --out runs.jsonl
+        python benchmarks/cg_vote_diff.py --seeds 0-9 [--confidences uniform|rfcn|ssd|low|low_informative] \\
+        [--score-map N] [--channel none] [--vote-run] --out runs.jsonl
     python benchmarks/cg_vote_diff.py --summarise runs.jsonl [more.jsonl ...]
 
 Per seed, one run of the harness (``cg_harness.run``) with the backend as the README builds it;
@@ -79,7 +79,13 @@ def run(args: argparse.Namespace) -> None:
             t0 = time.perf_counter()
             rec: dict = {"seed": seed, "branch": branch, "confidences": args.confidences, "channel": args.channel,
                          "frames": args.frames, "classes": world.classes}
-            backend = H.make_backend("comod", H.make_channel(world, args.channel))
+            cmap = None
+            if args.score_map:
+                from sgbelief.calibration.scores import ScoreCalibration
+
+                cmap = ScoreCalibration.fit(*H.annotated_detections(world, args.score_map, seed))
+            rec["score_map"] = args.score_map
+            backend = H.make_backend("comod", H.make_channel(world, args.channel), confidence_map=cmap)
             backend.print_summary = False
             r = H.run(world, cg, args.cg, backend=backend, seed=seed)
             objects = captured["objects"]
@@ -173,7 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cg", default=os.environ.get("SGBELIEF_CONCEPTGRAPH_PATH"))
     ap.add_argument("--seeds", default="0")
     ap.add_argument("--frames", type=int, default=60)
-    ap.add_argument("--confidences", default="uniform", choices=["uniform", "rfcn", "ssd"])
+    ap.add_argument("--confidences", default="uniform", choices=["uniform", "rfcn", "ssd", "low", "low_informative"])
+    ap.add_argument("--score-map", type=int, default=0, metavar="N",
+                    help="confidence_map=ScoreCalibration on N annotated detections (bench_cg_harness.py --score-map)")
     ap.add_argument("--channel", default="none", choices=["none", "oracle", "segmenter"])
     ap.add_argument("--vote-run", action="store_true", help="also run without the backend and check the vote")
     ap.add_argument("--out", default=None, help="append one JSON line per seed here")
