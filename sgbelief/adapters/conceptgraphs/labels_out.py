@@ -45,6 +45,7 @@ class LabelReader:
     _labels_per_node: dict[Any, Counter[str]]
     _claim_counts: dict[str, Any]
     _claims_below_half: int
+    _claims_counted: int
     _has_channel: bool
     _routed_detections: int
 
@@ -327,8 +328,7 @@ class LabelReader:
                 differing.append({"node": str(n), "vote": vote, "label": written,
                                   "why": _why(hit is None, written, counts, routed)})
         vocab = self.vocabulary
-        n_claims = sum(c.claims for c in self._claim_counts.values())
-        note = low_confidence_note(n_claims, self._claims_below_half, self._has_channel)
+        note = low_confidence_note(self._claims_counted, self._claims_below_half, self._has_channel)
         return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
                               below_half=self._claims_below_half, notes=[] if note is None else [note],
                               filtered=filtered, detections=self._routed_detections,
