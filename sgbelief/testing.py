@@ -217,7 +217,13 @@ def check_fast_matches_reference(
 def consensus_state(consensus: Any) -> list[Any]:
     """Everything observable of a :class:`~sgbelief.fusion.consensus.MapConsensus`, floats bit for bit:
     its claim table, the channel labels, the claim counts, the refit schedule and the fitted cells."""
-    fits = {repr(k): [v[0], v[1], v[2], v[3]] for k, v in sorted(consensus.calibration.fits_.items(), key=repr)}
+    from sgbelief.calibration.agreement_shift import ShiftCalibration
+
+    cal = consensus.calibration
+    if isinstance(cal, ShiftCalibration):  # one (shift, claims) per context
+        fits = {repr(k): list(v) for k, v in sorted(cal.shifts_.items())}
+    else:
+        fits = {repr(k): [v[0], v[1], v[2], v[3]] for k, v in sorted(cal.fits_.items(), key=repr)}
     return float_bits([consensus.node, consensus.pred, consensus.ctx, list(consensus.conf), consensus.cell,
                        list(consensus.decisive), list(consensus.mass), [consensus._labels.names],
                        consensus.event, sorted(consensus.labels.items(), key=repr),

@@ -1,9 +1,11 @@
-"""The backend says when most claims carry a confidence below 0.5 and no channel can calibrate them.
+"""Scores below 0.5 with no channel: the backend learns their shift from agreement, or says so.
 
 sgbelief reads a confidence as the probability that the claim is right, so with no channel every
 claim below 0.5 counts against its class. In ConceptGraphs' own loop (benchmarks/bench_cg_harness.py,
 no channel, confidences U(0.15, 0.55) whatever the class) that left 13-15 of 15-17 objects unknown
-(docs/conceptgraphs.md, "Detectors whose scores are not probabilities"): the user must hear it.
+(docs/conceptgraphs.md, "Detectors whose scores are not probabilities"). By default the backend
+learns how far the scores sit below how often its claims agree (``calibration.consensus.method:
+agreement_shift``) and its summary says by how much; a configuration without it gets the warning.
 """
 
 from __future__ import annotations
@@ -15,9 +17,12 @@ import pytest
 
 from sgbelief.adapters.conceptgraphs import ConceptGraphsBackend, LowConfidenceWarning
 from sgbelief.adapters.conceptgraphs.standins import make_detection
-from sgbelief.adapters.conceptgraphs.summary import LOW_CONFIDENCE_MIN_CLAIMS, BackendSummary, low_confidence_note
+from sgbelief.adapters.conceptgraphs.summary import (LOW_CONFIDENCE_MIN_CLAIMS, BackendSummary, low_confidence_note,
+                                                      score_shift_note)
 
 NAMES = ["chair", "sofa", "table"]
+#: the backend without the agreement shift: nothing but the raw scores (or a channel, or a map)
+RAW = {"calibration": {"consensus": {"method": "none"}}}
 
 
 def test_note_only_without_a_channel_for_a_majority_below_half_past_the_minimum():
@@ -42,7 +47,7 @@ def _route(backend: ConceptGraphsBackend, confidences: list[float]) -> None:
 
 
 def test_a_run_of_low_confidences_warns_once_at_a_frame_end_and_the_summary_notes_it():
-    backend = ConceptGraphsBackend("comod", class_names=NAMES, print_summary=False)
+    backend = ConceptGraphsBackend("comod", class_names=NAMES, print_summary=False, operator_config=RAW)
     _route(backend, [0.3] * (LOW_CONFIDENCE_MIN_CLAIMS - 1))
     with warnings.catch_warnings():
         warnings.simplefilter("error", LowConfidenceWarning)
@@ -71,7 +76,7 @@ def test_no_warning_when_claims_are_confident_or_a_channel_or_a_map_is_given(cas
         kw["channel"] = lambda det, node, t: "chair"
     else:
         kw["confidence_map"] = lambda c: 0.5 + c  # the user's map to probabilities
-    backend = ConceptGraphsBackend("comod", class_names=NAMES, print_summary=False, **kw)
+    backend = ConceptGraphsBackend("comod", class_names=NAMES, print_summary=False, operator_config=RAW, **kw)
     _route(backend, confidences)
     with warnings.catch_warnings():
         warnings.simplefilter("error", LowConfidenceWarning)
@@ -79,6 +84,39 @@ def test_no_warning_when_claims_are_confident_or_a_channel_or_a_map_is_given(cas
     s = backend.summary()
     assert s.notes == [] and "note:" not in s.format()
     assert s.below_half == 0 or case == "channel"
+
+
+def test_by_default_low_scores_that_agree_are_read_shifted_up_and_the_summary_says_by_how_much():
+    """Five objects, each claimed 40 times as one class at confidence 0.2-0.45 (the claims agree): no
+    warning, the fitted shift is positive, every object is labelled, and the summary's note names the
+    shift and how a claim at 0.35 reads."""
+    backend = ConceptGraphsBackend("comod", class_names=NAMES, print_summary=False)
+    rng = np.random.default_rng(1)
+    blob = rng.random((50, 3))
+    for t in range(200):
+        node, k = f"v{t % 5}", (t % 5) % len(NAMES)
+        if node not in backend.graph:
+            backend.graph.add_node(node)
+        backend.route_detection(make_detection(blob, k, NAMES[k], float(rng.uniform(0.2, 0.45)), t), {node: 1.0})
+        if t % 10 == 9:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", LowConfidenceWarning)
+                backend.end_frame()
+    shifts = backend.operator.score_shifts(backend.graph)
+    assert len(shifts) == 1 and next(iter(shifts.values()))[0] > 0.5
+    s = backend.summary()
+    assert s.unknown == 0 and s.labelled == 5
+    assert len(s.notes) == 1 and "read +" in s.notes[0] and "a claim at 0.35 reads as" in s.notes[0]
+    assert backend.operator.config.calibration.consensus.method == "agreement_shift"
+
+
+def test_the_shift_note_by_hand():
+    up = score_shift_note({"det": (1.0, 120)})
+    assert up == ["no channel: the scores of det are read +1.00 higher in log-odds, learned from how often 120 claims "
+                  "on objects with several claims agree (a claim at 0.35 reads as 0.59; docs/method.md §8)"]
+    down = score_shift_note({"det": (-0.4, 80)})
+    assert "fitted shift -0.40" in down[0] and "read as the scores say" in down[0]
+    assert score_shift_note({}) == []
 
 
 def test_summary_without_notes_formats_as_before():

@@ -184,12 +184,13 @@ def test_the_backend_keeps_exclusive_classes_apart_unless_configured():
     assert on.operator.config.geometric_evidence == "label"  # the backend's other default still applies
 
 
-def test_the_backend_turns_the_consensus_off_unless_configured_and_says_so():
-    """The map-wide consensus is off in the backend by default (docs/conceptgraphs.md, "Labels
-    out"); a config that sets the calibration keeps its own; the summary names both settings."""
+def test_the_backend_reads_scores_with_the_agreement_shift_unless_configured_and_says_so():
+    """The map-wide Dawid-Skene consensus is replaced in the backend by the agreement shift
+    (docs/conceptgraphs.md, "Labels out"); a config that sets the calibration keeps its own; the
+    summary names both settings."""
     off = ConceptGraphsBackend("comod", class_names=CLASSES, print_summary=False)
-    assert off.operator.config.calibration.consensus.method == "none"
-    assert off.operator.consensus_classes == frozenset()
+    assert off.operator.config.calibration.consensus.method == "agreement_shift"
+    assert off.operator.consensus_classes == frozenset({"is_chair", "is_table", "is_sofa"})
     on = ConceptGraphsBackend("comod", class_names=CLASSES, print_summary=False,
                               operator_config={"calibration": {"consensus": {"method": "dawid_skene"}}})
     assert on.operator.consensus_classes == frozenset({"is_chair", "is_table", "is_sofa"})
@@ -197,9 +198,9 @@ def test_the_backend_turns_the_consensus_off_unless_configured_and_says_so():
     assert off.operator.config.contested_labels == "refuse"
     assert on.operator.config.contested_labels == "consensus"
     text = off.summary([]).format()
-    assert ("operator: comod (geometric_evidence=label, consensus=none, exclusive_evidence=none, "
+    assert ("operator: comod (geometric_evidence=label, consensus=agreement_shift, exclusive_evidence=none, "
             "recalled_verdicts=retroactive, contested_labels=refuse)") in text
-    assert off.summary([]).to_dict()["operator"]["consensus"] == "none"
+    assert off.summary([]).to_dict()["operator"]["consensus"] == "agreement_shift"
 
 
 def test_a_merge_moves_the_operators_claim_table_with_the_beliefs():

@@ -36,7 +36,7 @@ def _streams():
 @settings(max_examples=120, deadline=None)
 @given(raw=_streams(), name=st.sampled_from(NAMES), tau_rev=st.sampled_from([0.05, 0.5]),
        strata=st.integers(1, 4), geo=st.sampled_from(["none", "verdict", "label"]),
-       consensus=st.sampled_from(["none", "dawid_skene"]), every=st.integers(1, 6),
+       consensus=st.sampled_from(["none", "dawid_skene", "agreement_shift"]), every=st.integers(1, 6),
        recall=st.sampled_from(["none", "unanimous", "retroactive"]), min_labels=st.integers(1, 2),
        adjudicated=st.sampled_from(["channel", "consensus"]), silent=st.sampled_from(["current", "at_arrival"]),
        contested=st.sampled_from(["refuse", "weigh"]))

@@ -19,10 +19,13 @@ class ConsensusConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    method: Literal["none", "dawid_skene"] = Field(
+    method: Literal["none", "dawid_skene", "agreement_shift"] = Field(
         "dawid_skene",
         description="claims the channel cannot adjudicate are calibrated on the map-wide Dawid-Skene consensus "
-        "(dawid_skene) or on the adjudicated claims' calibration like every other claim (none, the paper)",
+        "(dawid_skene), read as their confidence shifted in log-odds by one constant per detector context learned "
+        "from the map's agreement (agreement_shift: what a map of tens of objects identifies, the ConceptGraphs "
+        "backend's choice without a channel; docs/method.md §8), or on the adjudicated claims' calibration like "
+        "every other claim (none, the paper)",
     )
     every: int = Field(100, ge=1, description="claims between two refits of the consensus, at least")
     growth: float = Field(0.25, ge=0.0, description="... and at least this fraction of the claims held (O(log n) refits)")

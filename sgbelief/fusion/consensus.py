@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from sgbelief.calibration.agreement_shift import ShiftCalibration
 from sgbelief.calibration.config import CalibrationConfig
 from sgbelief.calibration.consensus import ConsensusCalibration
 from sgbelief.calibration.dawid_skene import NONE_CLASS, DawidSkene
@@ -117,7 +118,12 @@ class MapConsensus:
         #: ``adjudicated_elements: channel`` a unanimous verdict is a silent claim's outcome
         self.outcomes = outcomes if cc.adjudicated_elements == "channel" else None
         self._ds = DawidSkene(n_iter=cc.n_iter, smoothing=cc.smoothing, none_class=True, emission=cc.emission)
-        self.calibration = ConsensusCalibration(config.target_size, config.kappa_min, config.lr_max, config.cold_start)
+        #: ``method: agreement_shift``: no Dawid-Skene posterior, one shift per context of the
+        #: confidences' reading (:mod:`sgbelief.calibration.agreement_shift`)
+        self.shift_only = cc.method == "agreement_shift"
+        self.calibration: ConsensusCalibration | ShiftCalibration = (
+            ShiftCalibration(config.kappa_min, config.lr_max) if self.shift_only
+            else ConsensusCalibration(config.target_size, config.kappa_min, config.lr_max, config.cold_start))
         # codes of elements (the Dawid-Skene tasks), classes, contexts, cells and channel labels
         self._tasks, self._classes, self._contexts, self._cells, self._labels = (_Codes() for _ in range(5))
         # the claim table: one row per claim, integer codes and floats in typed arrays (~50 bytes a claim)
@@ -295,12 +301,25 @@ class MapConsensus:
         return cal.likelihood_ratio(confidence, (cell_i * _MAX_CLASSES + cls_i if cell_i >= 0 and cls_i >= 0 else -1,
                                                  cell_i, self._contexts.index.get(context, -1)))
 
+    def score_shifts(self) -> dict[str, tuple[float, int]]:
+        """{context: (fitted shift, claims in its fit)} under ``method: agreement_shift``; empty otherwise."""
+        if not isinstance(self.calibration, ShiftCalibration):
+            return {}
+        names = self._contexts.names
+        return {str(names[w]): fit for w, fit in self.calibration.shifts_.items()}
+
     def refit(self) -> None:
         """Refit the Dawid–Skene model and the per-cell calibration on the whole table."""
         n = len(self.event)
         self.n_at_fit = n
         self.n_fits += 1
         if n == 0:
+            return
+        if self.shift_only:
+            # every claim is evidence of agreement, adjudicated or not; merged elements are one task
+            task = self._representatives()[np.asarray(self.task, dtype=np.intp)]
+            self.calibration.fit(task, np.asarray(self.cls, dtype=np.intp), np.asarray(self.conf),
+                                 np.asarray(self.ctx_code, dtype=np.intp), np.asarray(self.mass))
             return
         probas = self.fit_consensus()
         silent = np.flatnonzero(np.frombuffer(bytes(self.decisive), dtype=np.uint8) == 0)

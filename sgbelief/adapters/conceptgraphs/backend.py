@@ -340,14 +340,15 @@ def _with_geometric_evidence(config: Any, geometric_evidence: str | None) -> Any
         # small calibrated weights that order effect cost label accuracy in ConceptGraphs' own
         # loop with no channel (docs/conceptgraphs.md, "Labels out"): off unless the config sets it
         update["exclusive_evidence"] = "none"
-    if "calibration" not in own and base.calibration.consensus.method != "none":
-        # the map-wide consensus (Dawid-Skene) needs many elements per class; a ConceptGraphs map
+    if "calibration" not in own and base.calibration.consensus.method == "dawid_skene":
+        # the map-wide Dawid-Skene consensus needs many elements per class; a ConceptGraphs map
         # holds tens of objects, most claims land on short-lived objects the mapper later filters or
         # merges, and the fit explains them as "none of these": without a channel that cost 0.4-0.6
-        # label accuracy in ConceptGraphs' own loop (docs/conceptgraphs.md, "Labels out"). Off
-        # unless the config sets it; the summary says which.
+        # label accuracy in ConceptGraphs' own loop (docs/conceptgraphs.md, "Labels out"). What such
+        # a map does identify is one parameter per detector: how far its scores sit from how often
+        # its claims agree (agreement_shift, docs/method.md §8). The summary says which.
         cal = base.calibration.model_dump()
-        cal["consensus"] = {**cal["consensus"], "method": "none"}
+        cal["consensus"] = {**cal["consensus"], "method": "agreement_shift"}
         update["calibration"] = cal
         if "contested_labels" not in own and base.contested_labels == "consensus":
             # with no consensus to ask, contested_labels: consensus refuses every contradicted claim:

@@ -13,7 +13,8 @@ from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-from sgbelief.adapters.conceptgraphs.summary import BackendSummary, ClassSummary, low_confidence_note
+from sgbelief.adapters.conceptgraphs.summary import (BackendSummary, ClassSummary, low_confidence_note,
+                                                      score_shift_note)
 from sgbelief.adapters.conceptgraphs.vocab import normalise_class_name
 from sgbelief.fusion.operators.calibrated import CalibratedOperator
 from sgbelief.fusion.rules import exclusive_marginal
@@ -47,6 +48,7 @@ class LabelReader:
     _claims_below_half: int
     _claims_counted: int
     _has_channel: bool
+    _reads_scores_shifted: bool
     _routed_detections: int
 
     def flush(self) -> None:  # pragma: no cover - MapBeliefs defines it
@@ -328,9 +330,12 @@ class LabelReader:
                 differing.append({"node": str(n), "vote": vote, "label": written,
                                   "why": _why(hit is None, written, counts, routed)})
         vocab = self.vocabulary
-        note = low_confidence_note(self._claims_counted, self._claims_below_half, self._has_channel)
+        shifts = self.operator.score_shifts(self.graph) if isinstance(self.operator, CalibratedOperator) else {}
+        notes = score_shift_note(shifts) if not self._has_channel else []
+        note = None if self._reads_scores_shifted else low_confidence_note(self._claims_counted,
+                                                                           self._claims_below_half, self._has_channel)
         return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,
-                              below_half=self._claims_below_half, notes=[] if note is None else [note],
+                              below_half=self._claims_below_half, notes=notes if note is None else [note, *notes],
                               filtered=filtered, detections=self._routed_detections,
                               events=self.evidence_count(),
                               classes={k: ClassSummary(**v) for k, v in sorted(per_class.items())},

@@ -147,6 +147,10 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
         self._low_confidence_warned = False
         #: a channel is configured (or a detection carried its own label): checked within 20 frames
         self._has_channel = self.channel is not None or self.channel_fn is not None
+        #: the operator learns the detector's score shift from agreement (no channel needed): the
+        #: low-confidence warning has nothing to warn of, the summary reports the shift instead
+        cfg = getattr(operator, "config", None)
+        self._reads_scores_shifted = cfg is not None and cfg.calibration.consensus.method == "agreement_shift"
         self._detections_per_node: Counter[Any] = Counter()
         self._routed_detections = 0
         self._last_t = None
@@ -543,7 +547,7 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
         (:class:`~sgbelief.errors.LowConfidenceWarning`) when most claims so far have a confidence
         below 0.5 and no channel can calibrate them."""
         self.flush()
-        if not self._low_confidence_warned and not self._has_channel:
+        if not self._low_confidence_warned and not self._has_channel and not self._reads_scores_shifted:
             note = low_confidence_note(self._claims_counted, self._claims_below_half, self._has_channel,
                                        LOW_CONFIDENCE_MIN_CLAIMS)
             if note is not None:

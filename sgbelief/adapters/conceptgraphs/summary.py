@@ -8,11 +8,13 @@ beside a saved map.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-__all__ = ["BackendSummary", "ClassSummary", "ClaimCounts", "LOW_CONFIDENCE_MIN_CLAIMS", "low_confidence_note"]
+__all__ = ["BackendSummary", "ClassSummary", "ClaimCounts", "LOW_CONFIDENCE_MIN_CLAIMS", "low_confidence_note",
+           "score_shift_note"]
 
 #: claims routed before :func:`low_confidence_note` judges their confidences
 LOW_CONFIDENCE_MIN_CLAIMS = 100
@@ -38,6 +40,23 @@ def low_confidence_note(claims: int, below_half: int, has_channel: bool, min_cla
             "probability of being right fitted on annotated detections: confidence_map="
             "sgbelief.calibration.scores.ScoreCalibration.fit(scores, correct) (sgbelief import-cg: --channel, "
             "--confidence-map)")
+
+
+def score_shift_note(shifts: dict[str, tuple[float, int]]) -> list[str]:
+    """What the backend learned of the detector's scores with no channel (``calibration.consensus.method:
+    agreement_shift``): per detector context, the fitted log-odds shift and how a claim at 0.35 reads."""
+    notes = []
+    for context, (shift, n) in sorted(shifts.items()):
+        if shift > 0:
+            read = 1.0 / (1.0 + math.exp(-(math.log(0.35 / 0.65) + shift)))
+            notes.append(f"no channel: the scores of {context} are read {shift:+.2f} higher in log-odds, learned from "
+                         f"how often {n} claims on objects with several claims agree (a claim at 0.35 reads as "
+                         f"{read:.2f}; docs/method.md §8)")
+        else:
+            notes.append(f"no channel: {n} claims of {context} on objects with several claims agree less often than "
+                         f"its scores say (fitted shift {shift:+.2f} in log-odds); they are read as the scores say, "
+                         "since lowering them would count claims against their classes (docs/method.md §8)")
+    return notes
 
 
 class ClaimCounts:

@@ -496,6 +496,15 @@ class CalibratedOperator(BaseOperator):
         n = self.config.calibration.support_strata
         return self.calibrator_.likelihood_ratio(event.confidence, stratified_context(event.context, 0, n), event.predicate)
 
+    def score_shifts(self, graph: SceneGraphModel) -> dict[str, tuple[float, int]]:
+        """{detector context: (fitted shift a_w, claims in its fit)} of the map's consensus under
+        ``calibration.consensus.method: agreement_shift`` (:mod:`sgbelief.calibration.agreement_shift`;
+        the reading applies max(0, a_w)); empty before the first fit or under another method."""
+        held = self._consensus.get(id(graph.provenance))
+        if held is None or held[0] is not graph.provenance:
+            return {}
+        return held[1].score_shifts()
+
     def freeze_calibration(self) -> None:
         """Stop learning from new outcomes (e.g. to replay with a fixed calibration)."""
         self.calibrator_.refit_all()
