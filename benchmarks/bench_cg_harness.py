@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="the detector's confidences: uniform whether its class is right or not (default), "
                          "drawn from a shipped detector's matched / unmatched records (confidences that carry "
                          "information), or scores that are not probabilities (low, low_informative: mostly below "
-                         "0.5, as open-vocabulary detectors report them)")
+                         "0.5, as open-vocabulary detectors report them; straddle: U(0.3, 0.9) whatever the class)")
     ap.add_argument("--score-map", type=int, default=0, metavar="N",
                     help="give the backend confidence_map=ScoreCalibration.fit(...) on N annotated detections of "
                          "the same detector (its own frames, another generator); 0: none (default)")

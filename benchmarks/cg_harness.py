@@ -161,9 +161,10 @@ class Detections:
 #: not: confidences that carry no information), or a shipped detector's records ("rfcn", "ssd"): a
 #: right class draws a score of that detector's matched records, a wrong one of its unmatched ones;
 #: or scores that are not probabilities, as open-vocabulary detectors report them: "low" (U(0.15,
-#: 0.55) whether right or not) and "low_informative" (U(0.3, 0.6) when right, U(0.1, 0.45) when not)
+#: 0.55) whether right or not) and "low_informative" (U(0.3, 0.6) when right, U(0.1, 0.45) when not);
+#: or "straddle" (U(0.3, 0.9) whether right or not: no information, a third of the claims below 0.5)
 CONFIDENCES = ["uniform"]
-CONFIDENCE_CHOICES = ["uniform", "rfcn", "ssd", "low", "low_informative"]
+CONFIDENCE_CHOICES = ["uniform", "rfcn", "ssd", "low", "low_informative", "straddle"]
 _SCORE_POOLS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
 
@@ -181,6 +182,8 @@ def _confidence(rng: np.random.Generator, right: bool) -> float:
     mode = CONFIDENCES[0]
     if mode == "uniform":
         return float(rng.uniform(0.55, 0.97))
+    if mode == "straddle":
+        return float(rng.uniform(0.3, 0.9))
     if mode == "low":
         return float(rng.uniform(0.15, 0.55))
     if mode == "low_informative":

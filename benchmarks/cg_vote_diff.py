@@ -1,7 +1,7 @@
 """Where the backend's labels differ from ConceptGraphs' vote in ConceptGraphs' own loop, and why.
 
     SGBELIEF_CONCEPTGRAPH_PATH=<concept-graphs, main or ali-dev> PYTHONPATH=$PWD \\
-        python benchmarks/cg_vote_diff.py --seeds 0-9 [--confidences uniform|rfcn|ssd|low|low_informative] \\
+        python benchmarks/cg_vote_diff.py --seeds 0-9 [--confidences uniform|rfcn|ssd|low|low_informative|straddle] \\
         [--score-map N] [--channel none] [--vote-run] --out runs.jsonl
     python benchmarks/cg_vote_diff.py --summarise runs.jsonl [more.jsonl ...]
 

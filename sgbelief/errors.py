@@ -122,9 +122,10 @@ def warn_at_caller(message: str, category: type[Warning]) -> None:
 
 class LowConfidenceWarning(SgbeliefWarning):
     """Most claims carry a confidence below 0.5 and nothing can calibrate them (no geometric
-    channel): sgbelief reads a confidence as the probability that the claim is right, so each such
-    claim counts against its class and objects are left unknown. The message gives the counts and
-    what to pass instead."""
+    channel, and the operator configured without the agreement shift the ConceptGraphs backend
+    uses by default): sgbelief reads a confidence as the probability that the claim is right, so
+    each such claim counts against its class and objects are left unknown. The message gives the
+    counts and what to pass instead."""
 
 
 class InputMismatchWarning(SgbeliefWarning):

@@ -70,8 +70,11 @@ class ConceptGraphsBackend(MapBeliefs):
         confidence_map: optional map of the detector's raw confidence before it enters an event:
             sgbelief reads a confidence as the probability that the detection is right, so for a
             detector whose scores are not, :class:`~sgbelief.calibration.scores.ScoreCalibration`
-            fitted on annotated detections (a run with most claims below 0.5 and no channel warns,
-            :class:`~sgbelief.errors.LowConfidenceWarning`).
+            fitted on annotated detections. Without one the operator learns how far the scores sit
+            below how often claims agree and reads them that much higher (``calibration.consensus.method:
+            agreement_shift``, the backend's default; the summary prints the shift). With the raw
+            reading configured (``method: none``), a run with most claims below 0.5 and no channel
+            warns (:class:`~sgbelief.errors.LowConfidenceWarning`).
         class_names: the run's class list, by class id, or its file / shipped name (``"replica"``,
             ``"scannet200"``) (default: the list ConceptGraphs loads).
         taxonomy: the taxonomy of synonyms / groups / hypernyms the open vocabulary uses
