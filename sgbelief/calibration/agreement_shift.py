@@ -28,8 +28,8 @@ claim favours its class over any single rival whenever p > 1/K, since its likeli
 p (K - 1) / (1 - p) is then above 1. Raising a deflated detector's readings brings them closer to
 that; lowering an over-confident detector's readings below 1/2 would turn claims that favour their
 class into claims counted against it. Measured in ConceptGraphs' own loop with no channel (harness,
-main, 10 seeds): the two-sided shift cost 0.03 of label accuracy with uninformative scores. With
-R-FCN's scores it gained 0.02–0.03. docs/conceptgraphs.md has the figures. An over-confident
+main, 10 seeds): the two-sided shift cost 0.03 of label accuracy with uninformative scores, and with
+R-FCN's scores it changed nothing (0.756 both ways). docs/method.md §8 has the figures. An over-confident
 detector therefore keeps the raw reading; :attr:`ShiftCalibration.shifts_` still holds the fitted
 a_w, for the summary.
 
