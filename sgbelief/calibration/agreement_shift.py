@@ -52,6 +52,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import expit
 
+from sgbelief.calibration.mondrian import cold_start_log_lr
+
 __all__ = ["ShiftCalibration", "fit_agreement_shift", "shifted_log_lr"]
 
 _exp = math.exp
@@ -61,9 +63,8 @@ _C_EPS = 1e-6
 
 def shifted_log_lr(c: float, shift: float, log_lr_max: float) -> float:
     """log Lambda of the shifted reading: logit(c) + a, c clipped to [1e-6, 1 - 1e-6] and the result
-    to [-log_lr_max, log_lr_max] (the cold start's raw rule when a = 0)."""
-    cc = min(max(c, _C_EPS), 1.0 - _C_EPS)
-    lo = math.log(cc / (1.0 - cc)) + shift
+    to [-log_lr_max, log_lr_max] (the cold start's raw rule, :func:`cold_start_log_lr`, when a = 0)."""
+    lo = cold_start_log_lr(c, "raw", math.inf) + shift
     return log_lr_max if lo > log_lr_max else -log_lr_max if lo < -log_lr_max else lo
 
 
