@@ -179,7 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cg", default=os.environ.get("SGBELIEF_CONCEPTGRAPH_PATH"))
     ap.add_argument("--seeds", default="0")
     ap.add_argument("--frames", type=int, default=60)
-    ap.add_argument("--confidences", default="uniform", choices=["uniform", "rfcn", "ssd", "low", "low_informative"])
+    from cg_harness import CONFIDENCE_CHOICES
+
+    ap.add_argument("--confidences", default="uniform", choices=CONFIDENCE_CHOICES)
     ap.add_argument("--score-map", type=int, default=0, metavar="N",
                     help="confidence_map=ScoreCalibration on N annotated detections (bench_cg_harness.py --score-map)")
     ap.add_argument("--channel", default="none", choices=["none", "oracle", "segmenter"])
