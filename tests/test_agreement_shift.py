@@ -12,7 +12,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.special import expit, logit
 
-from sgbelief.calibration.agreement_shift import ShiftCalibration, fit_agreement_shift, shifted_log_lr
+from scipy.stats import mannwhitneyu
+
+from sgbelief.calibration.agreement_shift import (ContextReading, ShiftCalibration, agreement_rank_test,
+                                                  fit_agreement_shift, level_log_lr, shifted_log_lr)
 
 
 def test_the_shifted_reading_by_hand() -> None:
@@ -120,7 +123,7 @@ def test_an_over_confident_detector_keeps_the_raw_reading() -> None:
     tasks, labels, conf = _stream(4, -1.5, n_tasks=60)
     conf = expit(logit(conf) + 2.0)  # scores 0.23-0.92, right with probability sigmoid(logit c - 3.5)
     cal = ShiftCalibration().fit(tasks, labels, conf, np.zeros(len(tasks), int))
-    assert cal.shifts_[0][0] < -1.0
+    assert cal.readings_[0].fitted < -1.0
     assert cal.shift(0) == 0.0
     assert cal.likelihood_ratio(0.8, (0, 0, 0))[0] == pytest.approx(4.0)
 
@@ -147,3 +150,83 @@ def test_the_map_consensus_with_the_shift() -> None:
     lam, kappa = mc.likelihood_ratio(0.3, "cell", "is_a", "det")
     assert lam > 1.0 > 0.3 / 0.7
     assert mc.posterior("v0", "is_a") is None
+
+
+# ----------------------------------------------------------------- scores that say nothing
+
+
+def test_the_rank_test_by_hand() -> None:
+    """Element 0: (a, 0.9), (a, 0.8), (b, 0.2); element 1: (a, 0.7), (a, 0.6). The first two claims'
+    others tie (a once, b once): left out. (b, 0.2)'s others are a, a: it disagrees. Element 1's
+    claims agree. The test compares [0.7, 0.6] with [0.2]. With the first claim weighing 2, the
+    second's others are a (2) against b (1): it agrees too."""
+    tasks, labels = np.array([0, 0, 0, 1, 1]), np.array([0, 0, 1, 0, 0])
+    conf, ctx = np.array([0.9, 0.8, 0.2, 0.7, 0.6]), np.zeros(5, int)
+    p, n_yes, n_no = agreement_rank_test(tasks, labels, conf, ctx)[0]
+    assert (n_yes, n_no) == (2, 1)
+    assert p == pytest.approx(mannwhitneyu([0.7, 0.6], [0.2], alternative="greater").pvalue)
+    p2, n_yes2, n_no2 = agreement_rank_test(tasks, labels, conf, ctx, weights=np.array([2.0, 1, 1, 1, 1]))[0]
+    assert (n_yes2, n_no2) == (3, 1)
+    assert p2 == pytest.approx(mannwhitneyu([0.8, 0.7, 0.6], [0.2], alternative="greater").pvalue)
+    # all claims agree: no disagreeing group, no evidence
+    assert agreement_rank_test(np.array([0, 0]), np.array([1, 1]), np.array([0.3, 0.4]), np.zeros(2, int))[0] == (1.0, 2, 0)
+
+
+def test_a_level_context_ignores_its_confidences() -> None:
+    """With the offsets replaced by 0 the EM sees no confidence: any scores give the level of c = 1/2,
+    and the level is the logit of the agreement rate the EM converges to."""
+    tasks, labels, conf = _stream(2, 1.5)
+    ctx = np.zeros(len(tasks), int)
+    a = fit_agreement_shift(tasks, labels, conf, ctx, level_contexts={0})[0][0]
+    a_half = fit_agreement_shift(tasks, labels, np.full(len(tasks), 0.5), ctx)[0][0]
+    assert a == a_half
+    assert level_log_lr(0.8, -0.5, 10.0) == 0.8 and level_log_lr(-0.3, 0.4, 10.0) == 0.4
+    assert level_log_lr(12.0, 0.0, 10.0) == 10.0
+
+
+def _uninformative_stream(seed: int, n_tasks: int = 40, k: int = 10, per_task: int = 6, accuracy: float = 0.7):
+    """As :func:`_stream`, but each claim is right with probability ``accuracy`` whatever its score."""
+    rng = np.random.default_rng(seed)
+    z = rng.integers(0, k, n_tasks)
+    tasks, labels, conf = [], [], []
+    for t in range(n_tasks):
+        for _ in range(per_task):
+            right = rng.random() < accuracy
+            labels.append(z[t] if right else rng.choice([x for x in range(k) if x != z[t]]))
+            tasks.append(t)
+            conf.append(rng.uniform(0.1, 0.6))
+    return np.array(tasks), np.array(labels), np.array(conf)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_scores_that_inform_are_read_and_scores_that_do_not_are_counted(seed: int) -> None:
+    """240 claims at level 0.05 (seeded): a detector right with probability sigmoid(logit c + 1.5)
+    passes the rank test and is read shifted; one right 70 % of the time whatever its score does not,
+    and every claim reads the same, above 1/2 (the level is about logit 0.7)."""
+    tasks, labels, conf = _stream(seed, 1.5)
+    cal = ShiftCalibration(test_level=0.05).fit(tasks, labels, conf, np.zeros(len(tasks), int))
+    r = cal.readings_[0]
+    assert r.reads_scores and r.p_value < 0.05 and cal.shift(0) == max(0.0, r.fitted)
+    tasks, labels, conf = _uninformative_stream(seed)
+    cal = ShiftCalibration(test_level=0.05).fit(tasks, labels, conf, np.zeros(len(tasks), int))
+    r = cal.readings_[0]
+    assert not r.reads_scores and r.p_value >= 0.05 and cal.shift(0) == 0.0
+    lams = {cal.likelihood_ratio(c, (0, 0, 0))[0] for c in (0.1, 0.3, 0.6, 0.9)}
+    assert len(lams) == 1 and lams.pop() > 1.0
+    assert r.fitted == pytest.approx(logit(0.7), abs=0.6)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.0, 1.0), st.integers(0, 3)), min_size=1, max_size=30),
+       st.floats(-3.0, 3.0), st.floats(-3.0, 3.0), st.floats(-2.0, 2.0))
+def test_the_batched_readings_are_the_scalar_ones(claims, shift, level, stated) -> None:
+    """Contexts 0 (scores read, shift), 1 (one level), 2 (not fitted: raw), 3 (scores read, negative
+    shift): ``likelihood_ratios`` gives what ``likelihood_ratio`` gives claim by claim."""
+    cal = ShiftCalibration()
+    cal.readings_ = {0: ContextReading(shift, 10, True), 1: ContextReading(level, 10, False, 0.5, stated),
+                     3: ContextReading(-abs(shift), 10, True)}
+    c = np.array([x for x, _ in claims])
+    w = np.array([k for _, k in claims])
+    lams, kappas = cal.likelihood_ratios(c, [w, w, w])
+    expected = [cal.likelihood_ratio(float(x), (0, 0, int(k)))[0] for x, k in claims]
+    np.testing.assert_allclose(lams, expected, rtol=1e-12)

@@ -27,6 +27,13 @@ class ConsensusConfig(BaseModel):
         "backend's choice without a channel; docs/method.md §8), or on the adjudicated claims' calibration like "
         "every other claim (none, the paper)",
     )
+    score_test_level: float | None = Field(
+        0.05, gt=0.0, lt=1.0,
+        description="agreement_shift only: level of the one-sided rank test that a detector context's scores "
+        "predict which of its claims agree with the other claims on their elements; a context whose test does not "
+        "reject has its claims read at one common level, so the map counts them (docs/method.md §8). null: every "
+        "context's scores are read",
+    )
     every: int = Field(100, ge=1, description="claims between two refits of the consensus, at least")
     growth: float = Field(0.25, ge=0.0, description="... and at least this fraction of the claims held (O(log n) refits)")
     bins: int = Field(4, ge=1, description="confidence bins per context (by rank) for the Dawid-Skene workers")

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from sgbelief.calibration.agreement_shift import ShiftCalibration
+from sgbelief.calibration.agreement_shift import ContextReading, ShiftCalibration
 from sgbelief.calibration.config import CalibrationConfig
 from sgbelief.calibration.consensus import ConsensusCalibration
 from sgbelief.calibration.dawid_skene import NONE_CLASS, DawidSkene
@@ -122,7 +122,7 @@ class MapConsensus:
         #: confidences' reading (:mod:`sgbelief.calibration.agreement_shift`)
         self.shift_only = cc.method == "agreement_shift"
         self.calibration: ConsensusCalibration | ShiftCalibration = (
-            ShiftCalibration(config.kappa_min, config.lr_max) if self.shift_only
+            ShiftCalibration(config.kappa_min, config.lr_max, cc.score_test_level) if self.shift_only
             else ConsensusCalibration(config.target_size, config.kappa_min, config.lr_max, config.cold_start))
         # codes of elements (the Dawid-Skene tasks), classes, contexts, cells and channel labels
         self._tasks, self._classes, self._contexts, self._cells, self._labels = (_Codes() for _ in range(5))
@@ -301,12 +301,12 @@ class MapConsensus:
         return cal.likelihood_ratio(confidence, (cell_i * _MAX_CLASSES + cls_i if cell_i >= 0 and cls_i >= 0 else -1,
                                                  cell_i, self._contexts.index.get(context, -1)))
 
-    def score_shifts(self) -> dict[str, tuple[float, int]]:
-        """{context: (fitted shift, claims in its fit)} under ``method: agreement_shift``; empty otherwise."""
+    def score_readings(self) -> dict[str, ContextReading]:
+        """{context: how its confidences are read} under ``method: agreement_shift``; empty otherwise."""
         if not isinstance(self.calibration, ShiftCalibration):
             return {}
         names = self._contexts.names
-        return {str(names[w]): fit for w, fit in self.calibration.shifts_.items()}
+        return {str(names[w]): reading for w, reading in self.calibration.readings_.items()}
 
     def refit(self) -> None:
         """Refit the Dawid–Skene model and the per-cell calibration on the whole table."""

@@ -72,7 +72,9 @@ class ConceptGraphsBackend(MapBeliefs):
             detector whose scores are not, :class:`~sgbelief.calibration.scores.ScoreCalibration`
             fitted on annotated detections. Without one the operator learns how far the scores sit
             below how often claims agree and reads them that much higher (``calibration.consensus.method:
-            agreement_shift``, the backend's default; the summary prints the shift). With the raw
+            agreement_shift``, the backend's default; the summary prints the shift); a detector whose
+            scores do not show which of its claims agree has every claim read at one level (a rank
+            test on the map, ``score_test_level``; the summary says so). With the raw
             reading configured (``method: none``), a run with most claims below 0.5 and no channel
             warns (:class:`~sgbelief.errors.LowConfidenceWarning`).
         class_names: the run's class list, by class id, or its file / shipped name (``"replica"``,

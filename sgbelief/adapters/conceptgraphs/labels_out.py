@@ -14,7 +14,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from sgbelief.adapters.conceptgraphs.summary import (BackendSummary, ClassSummary, low_confidence_note,
-                                                      score_shift_note)
+                                                      score_reading_note)
 from sgbelief.adapters.conceptgraphs.vocab import normalise_class_name
 from sgbelief.fusion.operators.calibrated import CalibratedOperator
 from sgbelief.fusion.rules import exclusive_marginal
@@ -330,8 +330,8 @@ class LabelReader:
                 differing.append({"node": str(n), "vote": vote, "label": written,
                                   "why": _why(hit is None, written, counts, routed)})
         vocab = self.vocabulary
-        shifts = self.operator.score_shifts(self.graph) if isinstance(self.operator, CalibratedOperator) else {}
-        notes = score_shift_note(shifts) if not self._has_channel else []
+        readings = self.operator.score_readings(self.graph) if isinstance(self.operator, CalibratedOperator) else {}
+        notes = score_reading_note(readings) if not self._has_channel else []
         note = None if self._reads_scores_shifted else low_confidence_note(self._claims_counted,
                                                                            self._claims_below_half, self._has_channel)
         return BackendSummary(objects=len(live), labelled=labelled, unknown=len(live) - labelled,

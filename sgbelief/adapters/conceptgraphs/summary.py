@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 __all__ = ["BackendSummary", "ClassSummary", "ClaimCounts", "LOW_CONFIDENCE_MIN_CLAIMS", "low_confidence_note",
-           "score_shift_note"]
+           "score_reading_note"]
 
 #: claims routed before :func:`low_confidence_note` judges their confidences
 LOW_CONFIDENCE_MIN_CLAIMS = 100
@@ -42,20 +42,27 @@ def low_confidence_note(claims: int, below_half: int, has_channel: bool, min_cla
             "--confidence-map)")
 
 
-def score_shift_note(shifts: dict[str, tuple[float, int]]) -> list[str]:
+def score_reading_note(readings: dict[str, Any]) -> list[str]:
     """What the backend learned of the detector's scores with no channel (``calibration.consensus.method:
-    agreement_shift``): per detector context, the fitted log-odds shift and how a claim at 0.35 reads."""
+    agreement_shift``; ``readings``: context -> :class:`~sgbelief.calibration.agreement_shift.ContextReading`):
+    per detector context, whether its scores are read and how a claim at 0.35 reads."""
     notes = []
-    for context, (shift, n) in sorted(shifts.items()):
-        if shift > 0:
-            read = 1.0 / (1.0 + math.exp(-(math.log(0.35 / 0.65) + shift)))
-            notes.append(f"no channel: the scores of {context} are read {shift:+.2f} higher in log-odds, learned from "
-                         f"how often {n} claims on objects with several claims agree (a claim at 0.35 reads as "
-                         f"{read:.2f}; docs/method.md §8)")
+    for context, r in sorted(readings.items()):
+        if not r.reads_scores:
+            level = max(r.fitted, r.stated)
+            notes.append(f"no channel: the scores of {context} do not show which of its claims agree with the other "
+                         f"claims on their objects (rank test p = {r.p_value:.2f} over {r.claims} claims); every claim "
+                         f"is read at one level, {1.0 / (1.0 + math.exp(-level)):.2f}, so the map counts them "
+                         "(docs/method.md §8)")
+        elif r.fitted > 0:
+            read = 1.0 / (1.0 + math.exp(-(math.log(0.35 / 0.65) + r.fitted)))
+            notes.append(f"no channel: the scores of {context} are read {r.fitted:+.2f} higher in log-odds, learned "
+                         f"from how often {r.claims} claims on objects with several claims agree (a claim at 0.35 "
+                         f"reads as {read:.2f}; docs/method.md §8)")
         else:
-            notes.append(f"no channel: {n} claims of {context} on objects with several claims agree less often than "
-                         f"its scores say (fitted shift {shift:+.2f} in log-odds); they are read as the scores say, "
-                         "since lowering them would count claims against their classes (docs/method.md §8)")
+            notes.append(f"no channel: {r.claims} claims of {context} on objects with several claims agree less often "
+                         f"than its scores say (fitted shift {r.fitted:+.2f} in log-odds); they are read as the scores "
+                         "say, since lowering them would count claims against their classes (docs/method.md §8)")
     return notes
 
 

@@ -48,6 +48,7 @@ from sgbelief.fusion.rules import (  # noqa: F401  (kl_upper_bound, revision_kl_
 from sgbelief.graph.provenance import EntryRecord, EntryStatus, EntryVerdict
 
 if TYPE_CHECKING:  # pragma: no cover
+    from sgbelief.calibration.agreement_shift import ContextReading
     from sgbelief.fusion.channel import GeometricChannel
     from sgbelief.fusion.events import EvidenceEvent
     from sgbelief.graph.entry_log import EntryLog
@@ -496,14 +497,15 @@ class CalibratedOperator(BaseOperator):
         n = self.config.calibration.support_strata
         return self.calibrator_.likelihood_ratio(event.confidence, stratified_context(event.context, 0, n), event.predicate)
 
-    def score_shifts(self, graph: SceneGraphModel) -> dict[str, tuple[float, int]]:
-        """{detector context: (fitted shift a_w, claims in its fit)} of the map's consensus under
-        ``calibration.consensus.method: agreement_shift`` (:mod:`sgbelief.calibration.agreement_shift`;
-        the reading applies max(0, a_w)); empty before the first fit or under another method."""
+    def score_readings(self, graph: SceneGraphModel) -> dict[str, ContextReading]:
+        """{detector context: how its confidences are read} of the map's consensus under
+        ``calibration.consensus.method: agreement_shift`` (:mod:`sgbelief.calibration.agreement_shift`:
+        the fitted a_w, whether the scores are read or counted at one level, the rank test's p-value);
+        empty before the first fit or under another method."""
         held = self._consensus.get(id(graph.provenance))
         if held is None or held[0] is not graph.provenance:
             return {}
-        return held[1].score_shifts()
+        return held[1].score_readings()
 
     def freeze_calibration(self) -> None:
         """Stop learning from new outcomes (e.g. to replay with a fixed calibration)."""
