@@ -52,9 +52,9 @@ at one common level, the same model with the offsets logit c_i replaced by 0: th
 then sigmoid(a_w) = sum m_i q_v(l_i) / sum m_i, the context's agreement rate. Every claim of the
 context weighs the same, so the map counts claims, as the vote does. As with the shift, that level
 never reads the detector below what it states: the reading is max(a_w, mean_i logit c_i) in
-log-odds. The test's power grows with the map: on ConceptGraphs' own loop with R-FCN's or SSD's
-scores it rejects on every one of 10 maps of 150 frames, and on 7-9 of 10 maps of 60 frames
-(docs/method.md §8). A map too small to show that its scores mean something is counted.
+log-odds. The test's power grows with the map: in ConceptGraphs' own loop with R-FCN's or SSD's
+scores it rejected on all 20 maps of 150 frames, and on 7-9 of 10 maps of 60 frames per branch
+(docs/conceptgraphs.md). A map too small to show that its scores mean something is counted.
 
 :class:`ShiftCalibration` answers the same queries as
 :class:`~sgbelief.calibration.consensus.ConsensusCalibration` (``likelihood_ratio``,
