@@ -317,7 +317,7 @@ class ShiftCalibration:
             if found.reads_scores:
                 shift[j] = max(0.0, found.fitted)
             else:
-                level[j] = max(found.fitted, found.stated)
+                level[j] = level_log_lr(found.fitted, found.stated, math.inf)
         lv = level[inv]
         log_lr = np.where(np.isnan(lv), np.log(cc / (1.0 - cc)) + shift[inv], lv)
         log_lr = np.clip(log_lr, -self.log_lr_max, self.log_lr_max)

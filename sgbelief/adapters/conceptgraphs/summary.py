@@ -11,7 +11,12 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # pragma: no cover
+    from collections.abc import Mapping
+
+    from sgbelief.calibration.agreement_shift import ContextReading
 
 __all__ = ["BackendSummary", "ClassSummary", "ClaimCounts", "LOW_CONFIDENCE_MIN_CLAIMS", "low_confidence_note",
            "score_reading_note"]
@@ -42,14 +47,14 @@ def low_confidence_note(claims: int, below_half: int, has_channel: bool, min_cla
             "--confidence-map)")
 
 
-def score_reading_note(readings: dict[str, Any]) -> list[str]:
+def score_reading_note(readings: Mapping[str, ContextReading]) -> list[str]:
     """What the backend learned of the detector's scores with no channel (``calibration.consensus.method:
     agreement_shift``; ``readings``: context -> :class:`~sgbelief.calibration.agreement_shift.ContextReading`):
     per detector context, whether its scores are read and how a claim at 0.35 reads."""
     notes = []
     for context, r in sorted(readings.items()):
         if not r.reads_scores:
-            level = max(r.fitted, r.stated)
+            level = r.log_lr(0.35, math.inf)  # the same for every confidence
             notes.append(f"no channel: the scores of {context} do not show which of its claims agree with the other "
                          f"claims on their objects (rank test p = {r.p_value:.2f} over {r.claims} claims); every claim "
                          f"is read at one level, {1.0 / (1.0 + math.exp(-level)):.2f}, so the map counts them "
