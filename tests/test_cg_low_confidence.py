@@ -5,7 +5,8 @@ claim below 0.5 counts against its class. In ConceptGraphs' own loop (benchmarks
 no channel, confidences U(0.15, 0.55) whatever the class) that left 13-15 of 15-17 objects unknown
 (docs/conceptgraphs.md, "Detectors whose scores are not probabilities"). By default the backend
 learns how far the scores sit below how often its claims agree (``calibration.consensus.method:
-agreement_shift``) and its summary says by how much; a configuration without it gets the warning.
+agreement_shift``) and its summary says by how much, or, when the scores do not show which claims
+agree, counts the claims at one level and says so; a configuration without it gets the warning.
 """
 
 from __future__ import annotations
