@@ -221,7 +221,8 @@ def consensus_state(consensus: Any) -> list[Any]:
 
     cal = consensus.calibration
     if isinstance(cal, ShiftCalibration):  # one reading per context
-        fits = {repr(k): [r.fitted, r.claims, r.reads_scores, r.p_value, r.stated] for k, r in sorted(cal.readings_.items())}
+        fits = {repr(k): [r.fitted, r.claims, r.reads_scores, r.p_value, r.stated]
+                for k, r in sorted(cal.readings_.items())}
     else:
         fits = {repr(k): [v[0], v[1], v[2], v[3]] for k, v in sorted(cal.fits_.items(), key=repr)}
     return float_bits([consensus.node, consensus.pred, consensus.ctx, list(consensus.conf), consensus.cell,

@@ -235,11 +235,16 @@ class ContextReading:
     #: mean logit c of the claims in the fit: the level the detector states
     stated: float = 0.0
 
+    @property
+    def applied_shift(self) -> float:
+        """The shift a reading of the scores applies: max(0, a_w), upward only (module docstring)."""
+        return self.fitted if self.fitted > 0.0 else 0.0
+
     def log_lr(self, c: float, log_lr_max: float) -> float:
-        """log Lambda of a claim at confidence ``c``: :func:`shifted_log_lr` with max(0, a_w), or
-        :func:`level_log_lr`."""
+        """log Lambda of a claim at confidence ``c``: :func:`shifted_log_lr` with :attr:`applied_shift`,
+        or :func:`level_log_lr`."""
         if self.reads_scores:
-            return shifted_log_lr(c, self.fitted if self.fitted > 0.0 else 0.0, log_lr_max)
+            return shifted_log_lr(c, self.applied_shift, log_lr_max)
         return level_log_lr(self.fitted, self.stated, log_lr_max)
 
 
@@ -294,7 +299,7 @@ class ShiftCalibration:
         """The shift the reading applies for a context code whose scores are read: max(0, a_w) (module
         docstring); 0, the raw reading, for a context not fitted or read at one level."""
         found = self.readings_.get(context)
-        return max(0.0, found.fitted) if found is not None and found.reads_scores else 0.0
+        return found.applied_shift if found is not None and found.reads_scores else 0.0
 
     def likelihood_ratio(self, c: float, keys: Sequence[int]) -> tuple[float, float]:
         """(Lambda_hat, kappa_hat) of a claim with confidence ``c``; ``keys[-1]`` is its context code
@@ -315,7 +320,7 @@ class ShiftCalibration:
             if found is None:
                 continue
             if found.reads_scores:
-                shift[j] = max(0.0, found.fitted)
+                shift[j] = found.applied_shift
             else:
                 level[j] = level_log_lr(found.fitted, found.stated, math.inf)
         lv = level[inv]
