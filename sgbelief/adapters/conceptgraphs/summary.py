@@ -60,7 +60,7 @@ def score_reading_note(readings: Mapping[str, ContextReading]) -> list[str]:
                          f"is read at one level, {1.0 / (1.0 + math.exp(-level)):.2f}, so the map counts them "
                          "(docs/method.md §8)")
         elif r.fitted > 0:
-            read = 1.0 / (1.0 + math.exp(-(math.log(0.35 / 0.65) + r.fitted)))
+            read = 1.0 / (1.0 + math.exp(-r.log_lr(0.35, math.inf)))  # the reading of a claim at 0.35
             notes.append(f"no channel: the scores of {context} are read {r.fitted:+.2f} higher in log-odds, learned "
                          f"from how often {r.claims} claims on objects with several claims agree (a claim at 0.35 "
                          f"reads as {read:.2f}; docs/method.md §8)")
