@@ -152,7 +152,8 @@ def main(argv: list[str] | None = None) -> int:
                       f"{cost['own_steady_us_per_detection']:.1f} us per detection without its refits (median over "
                       f"frames), steady ratio {cost['steady_ratio']:.2f}; all in, mean over frames "
                       f"{cost['own_mean_us_per_detection']:.1f} us per detection (of which refits "
-                      f"{cost['own_refit_us_per_detection']:.1f}) against replay {cost['replay_us_per_event']:.1f}, "
+                      f"{cost['own_refit_us_per_detection']:.1f}, {cost['own_refits']} refits after the first "
+                      f"timed frame) against replay {cost['replay_us_per_event']:.1f}, "
                       f"ratio {cost['mean_ratio']:.2f}")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
@@ -170,12 +171,14 @@ class OwnTime:
     def __init__(self) -> None:
         #: per per-frame merge: (own CPU seconds, detections)
         self.frames: list[tuple[float, int]] = []
-        #: per per-frame merge: CPU seconds of the operator's map-wide refits inside it
+        #: per per-frame merge: CPU seconds of the operator's map-wide refits inside it, and how many
         self.refits: list[float] = []
+        self.refit_counts: list[int] = []
         self._undo: list[tuple[type, str, object]] = []
         self._geo: float | None = None  # seconds in geometric merges of the current frame (None: outside)
         self._match = 0.0
         self._refit = 0.0
+        self._refit_n = 0
         self._op: object = None
 
     def install(self, operator: object = None) -> None:
@@ -213,20 +216,23 @@ class OwnTime:
     def _add_refit(self, seconds: float) -> None:
         if self._geo is not None:  # inside a per-frame merge
             self._refit += seconds
+            self._refit_n += 1
 
     def split(self, cost: dict) -> dict:
         """The figures with the operator's map-wide refits apart (the first timed frame left out, as
         in :meth:`us_per_detection`): the backend's own µs per detection without its refits (median
         over frames) against the replay's per-event cost without its refits (the steady ratio); and
-        all in, the mean over frames (refit frames included) against the whole replay."""
+        all in, the mean over frames (refit frames included) against the whole replay. The replay
+        holds every event of the run, the first frame's included, and every refit."""
         frames, refits = self.frames[1:] or self.frames, self.refits[1:] or self.refits
+        counts = self.refit_counts[1:] or self.refit_counts
         dets = max(sum(n for _, n in frames), 1)
         steady = float(np.median([1e6 * (sec - rf) / max(n, 1) for (sec, n), rf in zip(frames, refits)])) \
             if frames else float("nan")
         mean = 1e6 * sum(sec for sec, _ in frames) / dets
         replay_steady = cost["replay_us_per_event"] - cost["replay_refit_us_per_event"]
         return {"own_steady_us_per_detection": steady, "own_mean_us_per_detection": mean,
-                "own_refit_us_per_detection": 1e6 * sum(refits) / dets,
+                "own_refit_us_per_detection": 1e6 * sum(refits) / dets, "own_refits": sum(counts),
                 "replay_steady_us_per_event": replay_steady,
                 "steady_ratio": steady / replay_steady if replay_steady > 0 else float("nan"),
                 "mean_ratio": mean / cost["replay_us_per_event"] if cost["replay_us_per_event"] else float("nan")}
@@ -254,7 +260,8 @@ class OwnTime:
                 total = time.process_time() - t0 + self._match
                 self.frames.append((total - self._geo, len(dets)))  # type: ignore[arg-type]
                 self.refits.append(self._refit)
-                self._geo, self._match, self._refit = None, 0.0, 0.0
+                self.refit_counts.append(self._refit_n)
+                self._geo, self._match, self._refit, self._refit_n = None, 0.0, 0.0, 0
 
         self._set(cls, name, frame)
 

@@ -64,11 +64,12 @@ def test_split_separates_the_refits() -> None:
     # frames: (own seconds, detections); the first timed frame is left out
     own.frames = [(1.0, 100), (0.002, 10), (0.013, 10), (0.003, 10)]
     own.refits = [0.5, 0.0, 0.010, 0.0]
+    own.refit_counts = [2, 0, 1, 0]
     cost = {"replay_us_per_event": 50.0, "replay_refit_us_per_event": 30.0}
     out = own.split(cost)
     assert out["own_steady_us_per_detection"] == pytest.approx(300.0)  # median of 200, 300, 300
     assert out["own_mean_us_per_detection"] == pytest.approx(1e6 * 0.018 / 30)
-    assert out["own_refit_us_per_detection"] == pytest.approx(1e6 * 0.010 / 30)
+    assert out["own_refit_us_per_detection"] == pytest.approx(1e6 * 0.010 / 30) and out["own_refits"] == 1
     assert out["replay_steady_us_per_event"] == pytest.approx(20.0)
     assert out["steady_ratio"] == pytest.approx(15.0)
     assert out["mean_ratio"] == pytest.approx(600.0 / 50.0)
