@@ -148,11 +148,11 @@ def main(argv: list[str] | None = None) -> int:
             if own is not None:
                 print(f"[{gen}] {args.operator}/{ch}: the map-wide refits apart: replay {cost['replay_us_per_event']:.1f} "
                       f"us per event = {cost['replay_steady_us_per_event']:.1f} per event + "
-                      f"{cost['replay_refit_us_per_event']:.1f} of refits ({cost['refits']} refits); backend's own "
+                      f"{cost['replay_refit_us_per_event']:.1f} of refits ({_refits(cost['refits'])}); backend's own "
                       f"{cost['own_steady_us_per_detection']:.1f} us per detection without its refits (median over "
                       f"frames), steady ratio {cost['steady_ratio']:.2f}; all in, mean over frames "
                       f"{cost['own_mean_us_per_detection']:.1f} us per detection (of which refits "
-                      f"{cost['own_refit_us_per_detection']:.1f}, {cost['own_refits']} refits after the first "
+                      f"{cost['own_refit_us_per_detection']:.1f}, {_refits(cost['own_refits'])} after the first "
                       f"timed frame) against replay {cost['replay_us_per_event']:.1f}, "
                       f"ratio {cost['mean_ratio']:.2f}")
     if args.json:
@@ -169,11 +169,9 @@ class OwnTime:
     medians. The wrappers go on the generation classes before the backend is installed."""
 
     def __init__(self) -> None:
-        #: per per-frame merge: (own CPU seconds, detections)
-        self.frames: list[tuple[float, int]] = []
-        #: per per-frame merge: CPU seconds of the operator's map-wide refits inside it, and how many
-        self.refits: list[float] = []
-        self.refit_counts: list[int] = []
+        #: per per-frame merge: (own CPU seconds, detections, CPU seconds of the operator's map-wide
+        #: refits inside it, how many refits)
+        self.frames: list[tuple[float, int, float, int]] = []
         self._undo: list[tuple[type, str, object]] = []
         self._geo: float | None = None  # seconds in geometric merges of the current frame (None: outside)
         self._match = 0.0
@@ -224,15 +222,14 @@ class OwnTime:
         over frames) against the replay's per-event cost without its refits (the steady ratio); and
         all in, the mean over frames (refit frames included) against the whole replay. The replay
         holds every event of the run, the first frame's included, and every refit."""
-        frames, refits = self.frames[1:] or self.frames, self.refits[1:] or self.refits
-        counts = self.refit_counts[1:] or self.refit_counts
-        dets = max(sum(n for _, n in frames), 1)
-        steady = float(np.median([1e6 * (sec - rf) / max(n, 1) for (sec, n), rf in zip(frames, refits)])) \
-            if frames else float("nan")
-        mean = 1e6 * sum(sec for sec, _ in frames) / dets
+        frames = self.frames[1:] or self.frames
+        dets = max(sum(n for _, n, _, _ in frames), 1)
+        steady = float(np.median([1e6 * (sec - rf) / max(n, 1) for sec, n, rf, _ in frames])) if frames else float("nan")
+        mean = 1e6 * sum(sec for sec, _, _, _ in frames) / dets
         replay_steady = cost["replay_us_per_event"] - cost["replay_refit_us_per_event"]
         return {"own_steady_us_per_detection": steady, "own_mean_us_per_detection": mean,
-                "own_refit_us_per_detection": 1e6 * sum(refits) / dets, "own_refits": sum(counts),
+                "own_refit_us_per_detection": 1e6 * sum(rf for _, _, rf, _ in frames) / dets,
+                "own_refits": sum(k for _, _, _, k in frames),
                 "replay_steady_us_per_event": replay_steady,
                 "steady_ratio": steady / replay_steady if replay_steady > 0 else float("nan"),
                 "mean_ratio": mean / cost["replay_us_per_event"] if cost["replay_us_per_event"] else float("nan")}
@@ -240,7 +237,7 @@ class OwnTime:
     def us_per_detection(self) -> float:
         """Median over frames of the backend's own µs per detection (the first timed frame, which
         registers a pre-populated map at once, is left out when there are others)."""
-        per = [1e6 * sec / max(n, 1) for sec, n in self.frames]
+        per = [1e6 * sec / max(n, 1) for sec, n, _, _ in self.frames]
         return float(np.median(per[1:] if len(per) > 1 else per)) if per else float("nan")
 
     def _set(self, cls: type, name: str, fn: object) -> None:
@@ -258,9 +255,7 @@ class OwnTime:
                 return fn(gen, *a, **k)
             finally:
                 total = time.process_time() - t0 + self._match
-                self.frames.append((total - self._geo, len(dets)))  # type: ignore[arg-type]
-                self.refits.append(self._refit)
-                self.refit_counts.append(self._refit_n)
+                self.frames.append((total - self._geo, len(dets), self._refit, self._refit_n))  # type: ignore[arg-type]
                 self._geo, self._match, self._refit, self._refit_n = None, 0.0, 0.0, 0
 
         self._set(cls, name, frame)
@@ -278,6 +273,10 @@ class OwnTime:
                 self._geo += time.process_time() - t0
 
         self._set(cls, name, inner)
+
+
+def _refits(n: int) -> str:
+    return f"{n} refit" if n == 1 else f"{n} refits"
 
 
 def refit_timer(operator: object, add: object) -> None:

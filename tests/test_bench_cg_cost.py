@@ -61,10 +61,8 @@ def test_refit_timer_leaves_the_map_unchanged() -> None:
 
 def test_split_separates_the_refits() -> None:
     own = B.OwnTime()
-    # frames: (own seconds, detections); the first timed frame is left out
-    own.frames = [(1.0, 100), (0.002, 10), (0.013, 10), (0.003, 10)]
-    own.refits = [0.5, 0.0, 0.010, 0.0]
-    own.refit_counts = [2, 0, 1, 0]
+    # frames: (own seconds, detections, refit seconds, refits); the first timed frame is left out
+    own.frames = [(1.0, 100, 0.5, 2), (0.002, 10, 0.0, 0), (0.013, 10, 0.010, 1), (0.003, 10, 0.0, 0)]
     cost = {"replay_us_per_event": 50.0, "replay_refit_us_per_event": 30.0}
     out = own.split(cost)
     assert out["own_steady_us_per_detection"] == pytest.approx(300.0)  # median of 200, 300, 300
