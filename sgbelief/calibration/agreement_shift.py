@@ -178,27 +178,27 @@ def fit_agreement_shift(tasks: NDArray[np.intp], labels: NDArray[np.intp], confi
     a = np.zeros(n_w)
     if k < 2:  # one class claimed: every claim agrees; no level to learn
         return {int(w): (0.0, int(np.sum(ci == j))) for j, w in enumerate(ctx_codes)}
+    cell = t * k + lab  # claim i's entry (v_i, l_i) of the flattened posterior table
     q = np.zeros((n_t, k))
-    np.add.at(q, (t, lab), m)  # initial posterior: the weighted vote
+    np.add.at(q.reshape(-1), cell, m)  # initial posterior: the weighted vote
     q /= q.sum(axis=1, keepdims=True)
+    at_least, at_most = np.maximum, np.minimum  # np.clip in two calls (docs/performance.md)
     for _ in range(n_iter):
-        y = q[t, lab]
-        a = _intercepts(x, y, m, ci, n_w, a, bound)
-        pi = q.mean(axis=0)
-        p = expit(x + a[ci])
-        p = np.clip(p, 1e-12, 1.0 - 1e-12)
+        a = _intercepts(x, q.reshape(-1)[cell], m, ci, n_w, a, bound)  # M-step: a_w
+        pi = q.sum(axis=0) / n_t  # M-step: pi_z = mean_v q_v(z)
+        p = at_most(at_least(expit(x + a[ci]), 1e-12), 1.0 - 1e-12)
+        # E-step: log q_v(z) = log pi_z + sum_i m_i log P(l_i | z), every claim first counted wrong
         log_wrong = m * np.log((1.0 - p) / (k - 1))
-        log_lik = np.tile(np.log(np.maximum(pi, 1e-300)), (n_t, 1))
-        log_lik += np.bincount(t, weights=log_wrong, minlength=n_t)[:, None]
-        np.add.at(log_lik, (t, lab), m * np.log(p) - log_wrong)
+        log_lik = np.bincount(t, weights=log_wrong, minlength=n_t)[:, None] + np.log(at_least(pi, 1e-300))
+        np.add.at(log_lik.reshape(-1), cell, m * np.log(p) - log_wrong)  # then right where z = l_i
         log_lik -= log_lik.max(axis=1, keepdims=True)
         q_new = np.exp(log_lik)
         q_new /= q_new.sum(axis=1, keepdims=True)
-        delta = float(np.max(np.abs(q_new - q)))
+        delta = float(np.abs(q_new - q).max())
         q = q_new
         if delta <= tol:
             break
-    a = _intercepts(x, q[t, lab], m, ci, n_w, a, bound)
+    a = _intercepts(x, q.reshape(-1)[cell], m, ci, n_w, a, bound)
     n = np.bincount(ci, minlength=n_w)
     return {int(w): (float(a[j]), int(n[j])) for j, w in enumerate(ctx_codes)}
 
@@ -207,15 +207,17 @@ def _intercepts(x: NDArray[np.float64], y: NDArray[np.float64], m: NDArray[np.fl
                 n_w: int, a0: NDArray[np.float64], bound: float, steps: int = 50) -> NDArray[np.float64]:
     """Per context j, the root a_j in [-bound, bound] of sum_{i in j} m_i (y_i - sigmoid(x_i + a_j)),
     by Newton from ``a0`` (the left side decreases in a_j: one root, or a bound)."""
-    a = np.clip(np.asarray(a0, dtype=np.float64).copy(), -bound, bound)
+    at_least, at_most = np.maximum, np.minimum  # np.clip in two calls (docs/performance.md)
+    a = at_most(at_least(np.asarray(a0, dtype=np.float64), -bound), bound)
     target = np.bincount(ci, weights=m * y, minlength=n_w)
     for _ in range(steps):
         p = expit(x + a[ci])
-        g = target - np.bincount(ci, weights=m * p, minlength=n_w)
-        h = np.bincount(ci, weights=m * p * (1.0 - p), minlength=n_w)
-        step = np.clip(g / np.maximum(h, 1e-12), -1.0, 1.0)
-        a = np.clip(a + step, -bound, bound)
-        if np.max(np.abs(step)) < 1e-10:
+        mp = m * p
+        g = target - np.bincount(ci, weights=mp, minlength=n_w)
+        h = np.bincount(ci, weights=mp * (1.0 - p), minlength=n_w)
+        step = at_most(at_least(g / at_least(h, 1e-12), -1.0), 1.0)
+        a = at_most(at_least(a + step, -bound), bound)
+        if np.abs(step).max() < 1e-10:
             break
     return a
 
