@@ -4,7 +4,8 @@ The EM was rewritten for fewer numpy calls per iteration (a flat index into the 
 ``np.maximum`` / ``np.minimum`` for ``np.clip``, ``sum / n`` for ``mean``, the prior added to the
 wrong-claim totals instead of tiled under them). Each rewrite keeps every floating-point operation
 and its order, so the fitted shifts are equal to the last bit, not to a tolerance: a map refitted
-with either holds the same beliefs. ``_em_as_first_written`` is the reference, kept here verbatim.
+with either holds the same beliefs. ``_em_as_first_written`` is the reference: the loop kept here
+verbatim, over the claims as ``_fit_table`` prepares them (that part did not change).
 """
 
 from __future__ import annotations
@@ -16,32 +17,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.special import expit
 
-from sgbelief.calibration.agreement_shift import fit_agreement_shift
+from sgbelief.calibration.agreement_shift import _em_shifts, _fit_table, fit_agreement_shift
 
 
-def _em_as_first_written(tasks, labels, confidences, contexts, *, weights=None, n_iter=100, tol=1e-6,
-                         bound=math.log(1000.0), level_contexts=()):
-    t = np.asarray(tasks, dtype=np.intp)
-    lab = np.asarray(labels, dtype=np.intp)
-    ctx = np.asarray(contexts, dtype=np.intp)
-    m = np.ones(len(t)) if weights is None else np.asarray(weights, dtype=np.float64)
-    c = np.clip(np.asarray(confidences, dtype=np.float64), 1e-6, 1.0 - 1e-6)
-    if len(t) == 0:
-        return {}
-    keep = np.bincount(t)[t] >= 2
-    t, lab, ctx, m, c = t[keep], lab[keep], ctx[keep], m[keep], c[keep]
-    if len(t) == 0:
-        return {}
-    _, t = np.unique(t, return_inverse=True)
-    _, lab = np.unique(lab, return_inverse=True)
-    ctx_codes, ci = np.unique(ctx, return_inverse=True)
-    n_t, k, n_w = int(t.max()) + 1, int(lab.max()) + 1, len(ctx_codes)
-    x = np.log(c / (1.0 - c))
-    if level_contexts:
-        x[np.isin(ctx_codes[ci], np.fromiter(level_contexts, dtype=np.intp))] = 0.0
+def _em_as_first_written(table, n_iter, tol, bound):
+    """The EM loop as first written (verbatim but for reading its inputs from ``table``)."""
+    t, lab, ci, m, x = table.tasks, table.labels, table.contexts, table.masses, table.offsets
+    n_t, k, n_w = table.n_tasks, table.n_classes, len(table.codes)
     a = np.zeros(n_w)
-    if k < 2:
-        return {int(w): (0.0, int(np.sum(ci == j))) for j, w in enumerate(ctx_codes)}
     q = np.zeros((n_t, k))
     np.add.at(q, (t, lab), m)
     q /= q.sum(axis=1, keepdims=True)
@@ -62,9 +45,7 @@ def _em_as_first_written(tasks, labels, confidences, contexts, *, weights=None, 
         q = q_new
         if delta <= tol:
             break
-    a = _intercepts_as_first_written(x, q[t, lab], m, ci, n_w, a, bound)
-    n = np.bincount(ci, minlength=n_w)
-    return {int(w): (float(a[j]), int(n[j])) for j, w in enumerate(ctx_codes)}
+    return _intercepts_as_first_written(x, q[t, lab], m, ci, n_w, a, bound)
 
 
 def _intercepts_as_first_written(x, y, m, ci, n_w, a0, bound, steps=50):
@@ -101,23 +82,30 @@ def claim_tables(draw):
     return tasks[idx], labels[idx], conf[idx], contexts[idx], w
 
 
+def _same_bits(a, b) -> bool:
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
 @settings(max_examples=300, deadline=None)
 @given(claim_tables(), st.sampled_from([(), {0}, {4}, {0, 4}]), st.sampled_from([1, 3, 100]),
        st.sampled_from([1e-6, 0.0]))
-def test_the_em_equals_the_em_as_first_written_to_the_last_bit(table, level, n_iter, tol) -> None:
-    tasks, labels, conf, ctx, w = table
-    kw = dict(weights=w, n_iter=n_iter, tol=tol, level_contexts=level)
-    assert fit_agreement_shift(tasks, labels, conf, ctx, **kw) == _em_as_first_written(tasks, labels, conf, ctx, **kw)
+def test_the_em_equals_the_em_as_first_written_to_the_last_bit(claims, level, n_iter, tol) -> None:
+    tasks, labels, conf, ctx, w = claims
+    table = _fit_table(tasks, labels, conf, ctx, w, level)
+    if table is None or table.n_classes < 2:  # no EM runs
+        return
+    bound = math.log(1000.0)
+    assert _same_bits(_em_shifts(table, n_iter, tol, bound), _em_as_first_written(table, n_iter, tol, bound))
+    fit = fit_agreement_shift(tasks, labels, conf, ctx, weights=w, n_iter=n_iter, tol=tol, level_contexts=level)
+    reference = _em_as_first_written(table, n_iter, tol, bound)
+    assert fit == {int(c): (float(reference[j]), int(np.sum(table.contexts == j))) for j, c in enumerate(table.codes)}
 
 
 def test_a_large_table_equals_the_em_as_first_written() -> None:
     """2,000 claims of 14 classes in three contexts, one read at one level (seeded)."""
     rng = np.random.default_rng(7)
     n = 2000
-    tasks, labels = rng.integers(0, 500, n), rng.integers(0, 14, n)
-    conf, ctx = rng.random(n), rng.integers(0, 3, n)
-    w = rng.choice([1.0, 0.5, 0.3], n)
-    kw = dict(weights=w, level_contexts={1})
-    out = fit_agreement_shift(tasks, labels, conf, ctx, **kw)
-    assert set(out) == {0, 1, 2}
-    assert out == _em_as_first_written(tasks, labels, conf, ctx, **kw)
+    table = _fit_table(rng.integers(0, 500, n), rng.integers(0, 14, n), rng.random(n), rng.integers(0, 3, n),
+                       rng.choice([1.0, 0.5, 0.3], n), {1})
+    assert table is not None and len(table.codes) == 3
+    assert _same_bits(_em_shifts(table, 100, 1e-6, 5.0), _em_as_first_written(table, 100, 1e-6, 5.0))

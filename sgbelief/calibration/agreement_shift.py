@@ -157,27 +157,24 @@ def fit_agreement_shift(tasks: NDArray[np.intp], labels: NDArray[np.intp], confi
     (it is absent from the result, or at ``-bound`` / ``bound``). EM starts from the initial reading
     (a = 0) and stops when no posterior moves by more than ``tol``.
     """
-    t = np.asarray(tasks, dtype=np.intp)
-    lab = np.asarray(labels, dtype=np.intp)
-    ctx = np.asarray(contexts, dtype=np.intp)
-    m = np.ones(len(t)) if weights is None else np.asarray(weights, dtype=np.float64)
-    c = np.clip(np.asarray(confidences, dtype=np.float64), _C_EPS, 1.0 - _C_EPS)
-    if len(t) == 0:
+    table = _fit_table(tasks, labels, confidences, contexts, weights, level_contexts)
+    if table is None:
         return {}
-    keep = np.bincount(t)[t] >= 2
-    t, lab, ctx, m, c = t[keep], lab[keep], ctx[keep], m[keep], c[keep]
-    if len(t) == 0:
-        return {}
-    _, t = np.unique(t, return_inverse=True)
-    _, lab = np.unique(lab, return_inverse=True)
-    ctx_codes, ci = np.unique(ctx, return_inverse=True)
-    n_t, k, n_w = int(t.max()) + 1, int(lab.max()) + 1, len(ctx_codes)
-    x = np.log(c / (1.0 - c))
-    if level_contexts:
-        x[np.isin(ctx_codes[ci], np.fromiter(level_contexts, dtype=np.intp))] = 0.0
+    n_w = len(table.codes)
+    if table.n_classes < 2:  # one class claimed: every claim agrees; no level to learn
+        a = np.zeros(n_w)
+    else:
+        a = _em_shifts(table, n_iter, tol, bound)
+    n = np.bincount(table.contexts, minlength=n_w)
+    return {int(w): (float(a[j]), int(n[j])) for j, w in enumerate(table.codes)}
+
+
+def _em_shifts(table: _FitTable, n_iter: int, tol: float, bound: float) -> NDArray[np.float64]:
+    """The EM of :func:`fit_agreement_shift` (module docstring) on a table of two classes or more:
+    a_w per context, in the order of ``table.codes``."""
+    t, lab, ci, m, x = table.tasks, table.labels, table.contexts, table.masses, table.offsets
+    n_t, k, n_w = table.n_tasks, table.n_classes, len(table.codes)
     a = np.zeros(n_w)
-    if k < 2:  # one class claimed: every claim agrees; no level to learn
-        return {int(w): (0.0, int(np.sum(ci == j))) for j, w in enumerate(ctx_codes)}
     cell = t * k + lab  # claim i's entry (v_i, l_i) of the flattened posterior table
     q = np.zeros((n_t, k))
     np.add.at(q.reshape(-1), cell, m)  # initial posterior: the weighted vote
@@ -198,9 +195,49 @@ def fit_agreement_shift(tasks: NDArray[np.intp], labels: NDArray[np.intp], confi
         q = q_new
         if delta <= tol:
             break
-    a = _intercepts(x, q.reshape(-1)[cell], m, ci, n_w, a, bound)
-    n = np.bincount(ci, minlength=n_w)
-    return {int(w): (float(a[j]), int(n[j])) for j, w in enumerate(ctx_codes)}
+    return _intercepts(x, q.reshape(-1)[cell], m, ci, n_w, a, bound)
+
+
+@dataclass(frozen=True)
+class _FitTable:
+    """The claims that enter the EM (those on tasks with at least two claims), re-coded 0..n-1."""
+
+    tasks: NDArray[np.intp]
+    labels: NDArray[np.intp]
+    #: each claim's context, as an index into ``codes``
+    contexts: NDArray[np.intp]
+    masses: NDArray[np.float64]
+    #: logit c_i, or 0 for a context read at one level
+    offsets: NDArray[np.float64]
+    #: the context codes, in order
+    codes: NDArray[np.intp]
+    n_tasks: int
+    n_classes: int
+
+
+def _fit_table(tasks: NDArray[np.intp], labels: NDArray[np.intp], confidences: NDArray[np.float64],
+               contexts: NDArray[np.intp], weights: NDArray[np.float64] | None, level_contexts: Collection[int]
+               ) -> _FitTable | None:
+    """:func:`fit_agreement_shift`'s claims as the EM reads them; None when none is on a task with
+    two claims or more."""
+    t = np.asarray(tasks, dtype=np.intp)
+    lab = np.asarray(labels, dtype=np.intp)
+    ctx = np.asarray(contexts, dtype=np.intp)
+    m = np.ones(len(t)) if weights is None else np.asarray(weights, dtype=np.float64)
+    c = np.clip(np.asarray(confidences, dtype=np.float64), _C_EPS, 1.0 - _C_EPS)
+    if len(t) == 0:
+        return None
+    keep = np.bincount(t)[t] >= 2
+    t, lab, ctx, m, c = t[keep], lab[keep], ctx[keep], m[keep], c[keep]
+    if len(t) == 0:
+        return None
+    _, t = np.unique(t, return_inverse=True)
+    _, lab = np.unique(lab, return_inverse=True)
+    ctx_codes, ci = np.unique(ctx, return_inverse=True)
+    x = np.log(c / (1.0 - c))
+    if level_contexts:
+        x[np.isin(ctx_codes[ci], np.fromiter(level_contexts, dtype=np.intp))] = 0.0
+    return _FitTable(t, lab, ci, m, x, ctx_codes, int(t.max()) + 1, int(lab.max()) + 1)
 
 
 def _intercepts(x: NDArray[np.float64], y: NDArray[np.float64], m: NDArray[np.float64], ci: NDArray[np.intp],
