@@ -222,12 +222,13 @@ class DawidSkene:
         # steps are then one sparse product each
         cells = sparse.csr_matrix((w, (t, np.asarray(workers, dtype=np.intp) * n_labels + labels)),
                                   shape=(n_t, n_workers * n_labels))
+        by_cell = cells.T  # ((worker, label) cells x tasks), for the M-step's product
         groups = _Groups(cells, n_workers, n_labels) if self.emission == "dirichlet_multinomial" else None
         conc = np.full(n_workers, np.inf)
         theta = pi = None
         it = 0
         for it in range(1, self.n_iter + 1):
-            theta, pi = self._m_step(q, cells, n_workers, n_labels)
+            theta, pi = self._m_step(q, by_cell, n_workers, n_labels)
             if groups is None:
                 q_new = self._e_step(theta, pi, cells)
             else:
@@ -239,16 +240,16 @@ class DawidSkene:
             if delta <= self.tol:
                 break
         if theta is None:  # n_iter == 0: the initial vote
-            theta, pi = self._m_step(q, cells, n_workers, n_labels)
+            theta, pi = self._m_step(q, by_cell, n_workers, n_labels)
         self.priors_, self.errors_, self.probas_, self.n_iter_ = pi, theta, q, it
         self.concentrations_ = conc
         return self
 
-    def _m_step(self, q: NDArray[np.float64], cells: sparse.csr_matrix, n_w: int,
+    def _m_step(self, q: NDArray[np.float64], by_cell: sparse.csc_matrix, n_w: int,
                 n_l: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """pi_z = mean q_v(z) (smoothed); theta_w[z, l] ∝ smoothing + sum of q over w's observations labelled l."""
         k = q.shape[1]
-        counts = np.asarray(cells.T @ q)  # ((worker, label) cells, classes)
+        counts = np.asarray(by_cell @ q)  # ((worker, label) cells, classes)
         counts = counts.reshape(n_w, n_l, k).transpose(0, 2, 1) + self.smoothing  # (workers, classes, labels)
         counts = np.maximum(counts, _EPS)
         theta = counts / counts.sum(axis=2, keepdims=True)
@@ -276,13 +277,16 @@ class _Groups:
     """The observations as (task, worker, label) cells with their counts, for the overdispersed
     emission: the per-cell terms, their sums per task (E-step) and per worker (the choice of s_w)."""
 
-    def __init__(self, cells: sparse.csr_matrix, n_workers: int, n_labels: int) -> None:
+    def __init__(self, cells: sparse.csr_matrix, n_workers: int, n_labels: int, distinct: bool = True) -> None:
         cells = cells.copy()
         cells.sum_duplicates()
         cells.eliminate_zeros()
         self.n_tasks, self.n_workers, self.n_labels = cells.shape[0], n_workers, n_labels
         self.col = cells.indices.astype(np.intp)
         self.count = cells.data.astype(np.float64)
+        # a cell's terms depend on its (worker, label) column and its count alone: with ``distinct``
+        # they are computed once per distinct pair and gathered (docs/performance.md)
+        self.kinds = _CellKinds.of(self.col, self.count) if distinct else _CellKinds(self.col, self.count, None)
         self.task = np.repeat(np.arange(self.n_tasks, dtype=np.intp), np.diff(cells.indptr))
         self.worker = self.col // n_labels
         # cells -> their task: one sparse product sums a cell term per task
@@ -293,15 +297,18 @@ class _Groups:
         self.totals = np.bincount(self.cell_group, weights=self.count)
         self.group_worker = (group % n_workers).astype(np.intp)
 
-    def _theta(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(cells, classes): each cell's confusion entry per class."""
+    def _terms(self, kinds: _CellKinds, conc: NDArray[np.float64], theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(cells, classes): :func:`dirichlet_multinomial_cells` of the cells of ``kinds``, each
+        with its worker's concentration ``conc[w]``, computed once per kind."""
         n_w, k, n_l = theta.shape
-        return theta.transpose(0, 2, 1).reshape(n_w * n_l, k)[self.col]
+        rows = theta.transpose(0, 2, 1).reshape(n_w * n_l, k)  # ((worker, label) columns, classes)
+        terms = dirichlet_multinomial_cells(kinds.count, conc[kinds.col // n_l], rows[kinds.col])
+        return terms if kinds.of_cell is None else terms[kinds.of_cell]
 
     def e_step(self, theta: NDArray[np.float64], pi: NDArray[np.float64],
                conc: NDArray[np.float64]) -> NDArray[np.float64]:
         """log q_v(z) = log pi_z + sum of the task's cell terms (module docstring), normalised per v."""
-        terms = dirichlet_multinomial_cells(self.count, conc[self.worker], self._theta(theta))
+        terms = self._terms(self.kinds, conc, theta)
         log_lik = np.asarray(self.by_task @ terms) + np.log(pi)
         log_lik -= log_lik.max(axis=1, keepdims=True)
         q = np.exp(log_lik)
@@ -323,12 +330,12 @@ class _Groups:
         multi = cells[~single]
         n_groups = len(self.totals)
         singles_per_group = np.bincount(self.cell_group[cells[single]], minlength=n_groups).astype(np.float64)
-        th = self._theta(theta)[multi]
         qc = q[self.task[multi]]  # (cells, classes): the posterior of each cell's task
-        count, cell_group = self.count[multi], self.cell_group[multi]
+        cell_group = self.cell_group[multi]
+        kinds = self.kinds.subset(multi)
         best = None
         for s in grid:
-            per_cell = (qc * dirichlet_multinomial_cells(count, s, th)).sum(axis=1)
+            per_cell = (qc * self._terms(kinds, np.full(self.n_workers, s), theta)).sum(axis=1)
             summed = np.bincount(cell_group, weights=per_cell, minlength=n_groups).astype(np.float64)
             if np.isfinite(s):
                 summed += singles_per_group * np.log(s)
@@ -341,3 +348,29 @@ class _Groups:
             better = learn & (q_w > best + 1e-9 * np.abs(best))
             out[better], best[better] = s, q_w[better]
         return out
+
+
+@dataclass(frozen=True)
+class _CellKinds:
+    """Cells by kind, a kind being a distinct (column, count) pair: ``col[j]``, ``count[j]`` of kind j
+    and each cell's kind ``of_cell`` (None: every cell its own kind, in order). Most cells of a map
+    share a pair (a detector's two claims of ``chair`` on an element), and
+    :func:`dirichlet_multinomial_cells` is a function of the pair."""
+
+    col: NDArray[np.intp]
+    count: NDArray[np.float64]
+    of_cell: NDArray[np.intp] | None
+
+    @classmethod
+    def of(cls, col: NDArray[np.intp], count: NDArray[np.float64]) -> _CellKinds:
+        """The kinds of cells with columns ``col`` and counts ``count``."""
+        pairs = np.stack([col.astype(np.float64), count], axis=1)
+        kinds, of_cell = np.unique(pairs, axis=0, return_inverse=True)
+        return cls(kinds[:, 0].astype(np.intp), kinds[:, 1].copy(), of_cell.reshape(-1).astype(np.intp))
+
+    def subset(self, cells: NDArray[np.intp]) -> _CellKinds:
+        """The kinds of the cells ``cells`` (their indices) alone."""
+        if self.of_cell is None:
+            return _CellKinds(self.col[cells], self.count[cells], None)
+        kinds, of_cell = np.unique(self.of_cell[cells], return_inverse=True)
+        return _CellKinds(self.col[kinds], self.count[kinds], of_cell.reshape(-1).astype(np.intp))
