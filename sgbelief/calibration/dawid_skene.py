@@ -363,9 +363,12 @@ class _CellKinds:
 
     @classmethod
     def of(cls, col: NDArray[np.intp], count: NDArray[np.float64]) -> _CellKinds:
-        """The kinds of cells with columns ``col`` and counts ``count``."""
+        """The kinds of cells with columns ``col`` and counts ``count``; every cell its own kind when
+        fewer than half of them share one (the gather would cost more than it saves)."""
         pairs = np.stack([col.astype(np.float64), count], axis=1)
         kinds, of_cell = np.unique(pairs, axis=0, return_inverse=True)
+        if 2 * len(kinds) > len(col):
+            return cls(col, count, None)
         return cls(kinds[:, 0].astype(np.intp), kinds[:, 1].copy(), of_cell.reshape(-1).astype(np.intp))
 
     def subset(self, cells: NDArray[np.intp]) -> _CellKinds:
