@@ -1,9 +1,9 @@
 """The overdispersed E-step's terms computed once per kind of cell (a distinct (worker, label)
 column and count), against every cell computed on its own.
 
-``_Groups`` computes :func:`dirichlet_multinomial_cells` once per kind and gathers it to the cells
-(docs/performance.md); the values are those of each cell computed on its own, bit for bit, so the
-fit is the same to the last bit as well. Tables here have repeated kinds (whole and fractional
+``_Groups`` computes :func:`dirichlet_multinomial_cells` once per kind and reads each cell's term
+from its kind's row (docs/performance.md); the E-step is the one computing each cell on its own,
+bit for bit, and so is the whole fit. Tables here have repeated kinds (whole and fractional
 counts), workers with a finite and an infinite concentration, and independent workers.
 """
 
@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 from scipy import sparse
 
 from sgbelief.calibration import dawid_skene
-from sgbelief.calibration.dawid_skene import CONCENTRATIONS, DawidSkene, _Groups, dirichlet_multinomial_cells
+from sgbelief.calibration.dawid_skene import (CONCENTRATIONS, DawidSkene, _dirichlet_multinomial_by_column, _Groups,
+                                             dirichlet_multinomial_cells)
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
@@ -39,24 +40,49 @@ def _cells(tasks, workers, labels, weights, n_t, n_w, n_l):
     return sparse.csr_matrix((weights, (tasks, workers * n_l + labels)), shape=(n_t, n_w * n_l))
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 5), st.sampled_from([1.0, 1.0, 2.0, 3.0, 0.5, 1.5, 0.25, 7.0])),
+                min_size=1, max_size=40),
+       st.lists(st.sampled_from(CONCENTRATIONS), min_size=6, max_size=6), st.integers(1, 4), st.integers(0, 2**32 - 1))
+def test_the_terms_by_column_are_the_cells_terms(cells, s_of_col, k, seed) -> None:
+    """lnG(s theta) once per column gives each cell's :func:`dirichlet_multinomial_cells` bit for bit."""
+    col = np.array([c for c, _ in cells], dtype=np.intp)
+    count = np.array([n for _, n in cells])
+    s_of_col = np.array(s_of_col)
+    rows = np.random.default_rng(seed).dirichlet(np.ones(k) * 0.3, size=6) + 1e-12
+    want = dirichlet_multinomial_cells(count, s_of_col[col], rows[col])
+    assert _same_bits(_dirichlet_multinomial_by_column(count, col, s_of_col, rows), want)
+
+
+def _e_step_as_first_written(groups, theta, pi, conc):
+    """Every cell's term on its own, summed per task by a (tasks x cells) sparse product."""
+    n_w, k, n_l = theta.shape
+    terms = dirichlet_multinomial_cells(groups.count, conc[groups.worker],
+                                        theta.transpose(0, 2, 1).reshape(n_w * n_l, k)[groups.col])
+    nnz = len(groups.count)
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(groups.task, minlength=groups.n_tasks))])
+    by_task = sparse.csr_matrix((np.ones(nnz), np.arange(nnz), indptr), shape=(groups.n_tasks, nnz))
+    log_lik = np.asarray(by_task @ terms) + np.log(pi)
+    log_lik -= log_lik.max(axis=1, keepdims=True)
+    q = np.exp(log_lik)
+    return q / q.sum(axis=1, keepdims=True)
+
+
 @settings(max_examples=200, deadline=None)
 @given(observations(), st.integers(1, 4), st.integers(0, 2**32 - 1))
-def test_the_terms_by_kind_are_each_cells_own(obs, k, seed) -> None:
+def test_the_e_step_by_kind_is_the_e_step_cell_by_cell(obs, k, seed) -> None:
     *_, n_t, n_w, n_l = obs
     groups = _Groups(_cells(*obs), n_w, n_l)
     rng = np.random.default_rng(seed)
     theta = rng.dirichlet(np.ones(n_l), size=(n_w, k))
+    pi = rng.dirichlet(np.ones(k))
     conc = rng.choice(np.array(CONCENTRATIONS), n_w)
-    rows = theta.transpose(0, 2, 1).reshape(n_w * n_l, k)
-    own = dirichlet_multinomial_cells(groups.count, conc[groups.worker], rows[groups.col])
-    assert _same_bits(groups._terms(groups.kinds, conc, theta), own)
-    some = np.flatnonzero(groups.count != 1.0)
-    for s in (np.inf, 32.0, 0.5):  # as the concentration search asks: one s for all
-        want = dirichlet_multinomial_cells(groups.count[some], s, rows[groups.col[some]])
-        assert _same_bits(groups._terms(groups.kinds.subset(some), np.full(n_w, s), theta), want)
+    assert _same_bits(groups.e_step(theta, pi, conc), _e_step_as_first_written(groups, theta, pi, conc))
 
 
 class _EveryCellItsOwn(_Groups):
+    """The groups without kinds: every step as first written (each cell's term computed on its own)."""
+
     def __init__(self, cells, n_workers, n_labels):
         super().__init__(cells, n_workers, n_labels, distinct=False)
 

@@ -95,6 +95,33 @@ def dirichlet_multinomial_cells(n: NDArray[np.float64], s: NDArray[np.float64] |
     return out
 
 
+
+def _dirichlet_multinomial_by_column(count: NDArray[np.float64], col: NDArray[np.intp], s_of_col: NDArray[np.float64],
+                                     rows: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`dirichlet_multinomial_cells` of cells given by their (worker, label) column ``col``
+    (``rows[col]`` their confusion entries, ``s_of_col[col]`` their concentrations), equal to it bit
+    for bit: lnG(s theta), which depends on the column alone, is evaluated once per column, not once
+    per cell (``tests/test_dawid_skene_kinds.py``; docs/performance.md)."""
+    s = s_of_col[col]
+    theta = rows[col]
+    n = count[:, None]
+    finite = np.isfinite(s)
+    out = np.empty(theta.shape)
+    if not finite.all():
+        out[~finite] = n[~finite] * np.log(theta[~finite])
+    single = finite & (count == 1.0)
+    if single.any():
+        out[single] = np.log(s[single, None] * theta[single])
+    many = finite & ~single
+    if many.any():
+        a_col = s_of_col[:, None] * rows  # s theta per column: each cell's own product
+        lgamma_col = np.zeros(rows.shape)
+        fin = np.isfinite(s_of_col)
+        lgamma_col[fin] = gammaln(a_col[fin])
+        at = col[many]
+        out[many] = gammaln(n[many] + a_col[at]) - lgamma_col[at]
+    return out
+
 def dirichlet_multinomial_log_likelihood(cells: NDArray[np.float64], totals: NDArray[np.float64],
                                          s: float) -> NDArray[np.float64]:
     """log DM(n | s theta) of groups, from their cells' terms :func:`dirichlet_multinomial_cells`
@@ -289,26 +316,29 @@ class _Groups:
         self.kinds = _CellKinds.of(self.col, self.count) if distinct else _CellKinds(self.col, self.count, None)
         self.task = np.repeat(np.arange(self.n_tasks, dtype=np.intp), np.diff(cells.indptr))
         self.worker = self.col // n_labels
-        # cells -> their task: one sparse product sums a cell term per task
+        # cells -> their task: one sparse product sums a cell term per task, each cell's term read
+        # from its kind's row (the same values, added in the cells' order)
         nnz = len(self.count)
-        self.by_task = sparse.csr_matrix((np.ones(nnz), np.arange(nnz), cells.indptr), shape=(self.n_tasks, nnz))
+        kinds = self.kinds
+        by = np.arange(nnz) if kinds.of_cell is None else kinds.of_cell
+        self.by_task = sparse.csr_matrix((np.ones(nnz), by, cells.indptr), shape=(self.n_tasks, len(kinds.col)))
         # the (task, worker) groups: each cell's group, the groups' totals N_vw and workers
         group, self.cell_group = np.unique(self.task * n_workers + self.worker, return_inverse=True)
         self.totals = np.bincount(self.cell_group, weights=self.count)
         self.group_worker = (group % n_workers).astype(np.intp)
 
-    def _terms(self, kinds: _CellKinds, conc: NDArray[np.float64], theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(cells, classes): :func:`dirichlet_multinomial_cells` of the cells of ``kinds``, each
-        with its worker's concentration ``conc[w]``, computed once per kind."""
+    @staticmethod
+    def _rows(theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """((worker, label) columns, classes): each column's confusion entry per class."""
         n_w, k, n_l = theta.shape
-        rows = theta.transpose(0, 2, 1).reshape(n_w * n_l, k)  # ((worker, label) columns, classes)
-        terms = dirichlet_multinomial_cells(kinds.count, conc[kinds.col // n_l], rows[kinds.col])
-        return terms if kinds.of_cell is None else terms[kinds.of_cell]
+        return theta.transpose(0, 2, 1).reshape(n_w * n_l, k)
 
     def e_step(self, theta: NDArray[np.float64], pi: NDArray[np.float64],
                conc: NDArray[np.float64]) -> NDArray[np.float64]:
         """log q_v(z) = log pi_z + sum of the task's cell terms (module docstring), normalised per v."""
-        terms = self._terms(self.kinds, conc, theta)
+        kinds = self.kinds  # one term per kind; by_task reads each cell's from its kind's row
+        conc_of_col = np.repeat(conc, self.n_labels)  # column w * n_labels + l: worker w's s
+        terms = _dirichlet_multinomial_by_column(kinds.count, kinds.col, conc_of_col, self._rows(theta))
         log_lik = np.asarray(self.by_task @ terms) + np.log(pi)
         log_lik -= log_lik.max(axis=1, keepdims=True)
         q = np.exp(log_lik)
@@ -333,9 +363,11 @@ class _Groups:
         qc = q[self.task[multi]]  # (cells, classes): the posterior of each cell's task
         cell_group = self.cell_group[multi]
         kinds = self.kinds.subset(multi)
+        rows = self._rows(theta)
         best = None
         for s in grid:
-            per_cell = (qc * self._terms(kinds, np.full(self.n_workers, s), theta)).sum(axis=1)
+            terms = _dirichlet_multinomial_by_column(kinds.count, kinds.col, np.full(len(rows), s), rows)  # per kind
+            per_cell = (qc * (terms if kinds.of_cell is None else terms[kinds.of_cell])).sum(axis=1)
             summed = np.bincount(cell_group, weights=per_cell, minlength=n_groups).astype(np.float64)
             if np.isfinite(s):
                 summed += singles_per_group * np.log(s)
