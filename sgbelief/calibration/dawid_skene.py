@@ -95,7 +95,6 @@ def dirichlet_multinomial_cells(n: NDArray[np.float64], s: NDArray[np.float64] |
     return out
 
 
-
 def _dirichlet_multinomial_by_column(count: NDArray[np.float64], col: NDArray[np.intp], s_of_col: NDArray[np.float64],
                                      rows: NDArray[np.float64]) -> NDArray[np.float64]:
     """:func:`dirichlet_multinomial_cells` of cells given by their (worker, label) column ``col``
@@ -121,6 +120,7 @@ def _dirichlet_multinomial_by_column(count: NDArray[np.float64], col: NDArray[np
         at = col[many]
         out[many] = gammaln(n[many] + a_col[at]) - lgamma_col[at]
     return out
+
 
 def dirichlet_multinomial_log_likelihood(cells: NDArray[np.float64], totals: NDArray[np.float64],
                                          s: float) -> NDArray[np.float64]:
@@ -312,7 +312,7 @@ class _Groups:
         self.col = cells.indices.astype(np.intp)
         self.count = cells.data.astype(np.float64)
         # a cell's terms depend on its (worker, label) column and its count alone: with ``distinct``
-        # they are computed once per distinct pair and gathered (docs/performance.md)
+        # they are computed once per distinct pair, a kind (docs/performance.md)
         self.kinds = _CellKinds.of(self.col, self.count) if distinct else _CellKinds(self.col, self.count, None)
         self.task = np.repeat(np.arange(self.n_tasks, dtype=np.intp), np.diff(cells.indptr))
         self.worker = self.col // n_labels
@@ -396,7 +396,7 @@ class _CellKinds:
     @classmethod
     def of(cls, col: NDArray[np.intp], count: NDArray[np.float64]) -> _CellKinds:
         """The kinds of cells with columns ``col`` and counts ``count``; every cell its own kind when
-        fewer than half of them share one (the gather would cost more than it saves)."""
+        there are more kinds than half the cells (reading by kind would cost more than it saves)."""
         pairs = np.stack([col.astype(np.float64), count], axis=1)
         kinds, of_cell = np.unique(pairs, axis=0, return_inverse=True)
         if 2 * len(kinds) > len(col):
