@@ -155,6 +155,14 @@ def main(argv: list[str] | None = None) -> int:
                       f"{cost['own_refit_us_per_detection']:.1f}, {_refits(cost['own_refits'])} after the first "
                       f"timed frame) against replay {cost['replay_us_per_event']:.1f}, "
                       f"ratio {cost['mean_ratio']:.2f}")
+                print(f"[{gen}] {args.operator}/{ch}: what no adapter can leave out, inside the same frames: "
+                      f"the operator's own update {cost['operator_in_loop_us_per_event']:.1f} us per event without "
+                      f"its refits ({cost['operator_in_loop_ratio']:.2f}x its replay of the same events, "
+                      f"{cost['replay_steady_us_per_event']:.1f}) and {cost['summaries']} geometry summaries: "
+                      f"{cost['floor_us_per_detection']:.1f} us per detection together (median over frames), "
+                      f"{cost['floor_ratio']:.2f}x the replay; the rest of the backend's own time "
+                      f"{cost['rest_us_per_detection']:.1f} us per detection (identity, graph nodes, routing, "
+                      f"bookkeeping)")
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
     return 0
@@ -178,13 +186,24 @@ class OwnTime:
         self._refit = 0.0
         self._refit_n = 0
         self._op: object = None
+        #: per per-frame merge, aligned with ``frames``: (CPU seconds of the operator's own
+        #: ``update_many`` without its refits, the events it applied, CPU seconds of the geometry
+        #: summaries, how many): what no adapter can leave out (see :meth:`split`)
+        self.parts: list[tuple[float, int, float, int]] = []
+        self._update = 0.0
+        self._update_events = 0
+        self._summary = 0.0
+        self._summary_n = 0
 
     def install(self, operator: object = None) -> None:
         """Wrap the generation classes' per-frame merges; with ``operator`` (the backend's), also
         time its map-wide refits (:func:`refit_timer`)."""
-        if operator is not None and hasattr(operator, "_refit_consensus"):
+        if operator is not None:
             self._op = operator
-            refit_timer(operator, self._add_refit)
+            if hasattr(operator, "_refit_consensus"):
+                refit_timer(operator, self._add_refit)
+            update_timer(operator, self._add_update, lambda: self._refit)
+        from sgbelief.adapters.conceptgraphs import map_beliefs, new_objects
         from sgbelief.adapters.conceptgraphs.generation_ali_dev import AliDevGeneration
         from sgbelief.adapters.conceptgraphs.generation_main import MainGeneration
 
@@ -192,6 +211,8 @@ class OwnTime:
         self._frame(AliDevGeneration, "merge_obj_matches", 0)
         for cls in (MainGeneration, AliDevGeneration):
             self._inner(cls, "geo_merge")
+        for module in (new_objects, map_beliefs):  # a new object's summary, and a merged one's
+            self._summaries(module)
         fn = AliDevGeneration.match_detections_to_objects
 
         def match(gen: object, *a: object, **k: object) -> object:
@@ -208,13 +229,20 @@ class OwnTime:
             setattr(cls, name, fn)
         self._undo.clear()
         if self._op is not None:
-            del self._op._refit_consensus  # type: ignore[attr-defined]  # the class's method again
+            for name in ("_refit_consensus", "update_many"):  # the class's methods again
+                vars(self._op).pop(name, None)
             self._op = None
 
     def _add_refit(self, seconds: float) -> None:
         if self._geo is not None:  # inside a per-frame merge
             self._refit += seconds
             self._refit_n += 1
+
+    def _add_update(self, seconds: float, events: int) -> None:
+        """One ``update_many`` call: ``seconds`` without its refits, ``events`` applied."""
+        if self._geo is not None:
+            self._update += seconds
+            self._update_events += events
 
     def split(self, cost: dict) -> dict:
         """The figures with the operator's map-wide refits apart (the first timed frame left out, as
@@ -232,7 +260,32 @@ class OwnTime:
                 "own_refits": sum(k for _, _, _, k in frames),
                 "replay_steady_us_per_event": replay_steady,
                 "steady_ratio": steady / replay_steady if replay_steady > 0 else float("nan"),
-                "mean_ratio": mean / cost["replay_us_per_event"] if cost["replay_us_per_event"] else float("nan")}
+                "mean_ratio": mean / cost["replay_us_per_event"] if cost["replay_us_per_event"] else float("nan"),
+                **self._floor(replay_steady)}
+
+    def _floor(self, replay_steady: float) -> dict:
+        """What no adapter can leave out, timed inside the same frames as :meth:`split` (the first
+        left out): the operator's own ``update_many`` on the frame's events (its refits apart) and
+        the geometry summaries a node's centroid and box need. ``operator_in_loop_us_per_event``
+        is the first per event (total over the frames), against the same events replayed
+        (``operator_in_loop_ratio``); ``floor_us_per_detection`` the two together per detection,
+        median over frames, against the replay (``floor_ratio``); ``rest_us_per_detection`` the
+        backend's own time without its refits and without the floor, median over frames: the
+        adapter's identity look-ups, graph nodes, routing and bookkeeping."""
+        pairs = list(zip(self.frames, self.parts))
+        pairs = pairs[1:] or pairs
+        nan = float("nan")
+        if not pairs:
+            return {"operator_in_loop_us_per_event": nan, "operator_in_loop_ratio": nan,
+                    "floor_us_per_detection": nan, "floor_ratio": nan, "rest_us_per_detection": nan}
+        events = sum(p[1] for _, p in pairs)
+        op_us = 1e6 * sum(p[0] for _, p in pairs) / events if events else nan
+        floor = float(np.median([1e6 * (p[0] + p[2]) / max(f[1], 1) for f, p in pairs]))
+        rest = float(np.median([1e6 * (f[0] - f[2] - p[0] - p[2]) / max(f[1], 1) for f, p in pairs]))
+        ok = replay_steady > 0
+        return {"operator_in_loop_us_per_event": op_us, "operator_in_loop_ratio": op_us / replay_steady if ok else nan,
+                "floor_us_per_detection": floor, "floor_ratio": floor / replay_steady if ok else nan,
+                "rest_us_per_detection": rest, "summaries": sum(p[3] for _, p in pairs)}
 
     def us_per_detection(self) -> float:
         """Median over frames of the backend's own µs per detection (the first timed frame, which
@@ -256,7 +309,9 @@ class OwnTime:
             finally:
                 total = time.process_time() - t0 + self._match
                 self.frames.append((total - self._geo, len(dets), self._refit, self._refit_n))  # type: ignore[arg-type]
+                self.parts.append((self._update, self._update_events, self._summary, self._summary_n))
                 self._geo, self._match, self._refit, self._refit_n = None, 0.0, 0.0, 0
+                self._update, self._update_events, self._summary, self._summary_n = 0.0, 0, 0.0, 0
 
         self._set(cls, name, frame)
 
@@ -273,6 +328,24 @@ class OwnTime:
                 self._geo += time.process_time() - t0
 
         self._set(cls, name, inner)
+
+    def _summaries(self, module: object) -> None:
+        """Time ``module.geometry_summary`` inside the per-frame merges (the adapter's modules look
+        it up at call time)."""
+        fn = module.geometry_summary  # type: ignore[attr-defined]
+
+        def summary(obj: object) -> object:
+            if self._geo is None:
+                return fn(obj)
+            t0 = time.process_time()
+            try:
+                return fn(obj)
+            finally:
+                self._summary += time.process_time() - t0
+                self._summary_n += 1
+
+        self._undo.append((module, "geometry_summary", fn))  # type: ignore[arg-type]
+        setattr(module, "geometry_summary", summary)
 
 
 def _refits(n: int) -> str:
@@ -294,6 +367,26 @@ def refit_timer(operator: object, add: object) -> None:
             add(time.process_time() - t0)  # type: ignore[operator]
 
     operator._refit_consensus = timed  # type: ignore[attr-defined]
+
+
+def update_timer(operator: object, add: object, refit_seconds: object = lambda: 0.0) -> None:
+    """Time ``operator.update_many`` (the backend applies a frame's queued events in one call):
+    shadowed on the instance by a wrapper calling ``add(cpu_seconds, events)``, the seconds without
+    the refits run inside the call (``refit_seconds()``: the refit seconds recorded so far, read
+    before and after it); ``del operator.update_many`` undoes it."""
+    fn = operator.update_many  # type: ignore[attr-defined]
+
+    def timed(graph: object, items: object, *a: object, **k: object) -> object:
+        items = list(items)  # type: ignore[call-overload]
+        refit_before = refit_seconds()  # type: ignore[operator]
+        t0 = time.process_time()
+        try:
+            return fn(graph, items, *a, **k)
+        finally:
+            seconds = time.process_time() - t0 - (refit_seconds() - refit_before)  # type: ignore[operator]
+            add(seconds, len(items))  # type: ignore[operator]
+
+    operator.update_many = timed  # type: ignore[attr-defined]
 
 
 def _cost_per_detection(backend: object, vote: H.RunResult, r: H.RunResult) -> dict:
