@@ -43,7 +43,9 @@ def main(argv: list[str] | None = None) -> int:
                          "also reports the backend's cost per detection beside the operator's cost per event "
                          "when the run's events are replayed (update_many into a fresh graph), and the backend's own "
                          "CPU time inside the merge step (its per-frame merge minus ConceptGraphs' geometric "
-                         "merges in it)")
+                         "merges in it), split into the operator's map-wide refits, what no adapter can leave out "
+                         "(the operator's own update_many and the geometry summaries, timed inside the loop) and "
+                         "the rest (docs/performance.md)")
     ap.add_argument("--clutter", type=int, default=0,
                     help="scatter this many small objects in the room: more detections per frame (a median of "
                          "10 with 25 at 128x96 or 192x144, 19 with 150 at 128x96, 29 with 200 at 192x144); label "
