@@ -39,9 +39,10 @@ def _streams():
        consensus=st.sampled_from(["none", "dawid_skene", "agreement_shift"]), every=st.integers(1, 6),
        recall=st.sampled_from(["none", "unanimous", "retroactive"]), min_labels=st.integers(1, 2),
        adjudicated=st.sampled_from(["channel", "consensus"]), silent=st.sampled_from(["current", "at_arrival"]),
-       contested=st.sampled_from(["refuse", "weigh"]), score_test=st.sampled_from([None, 0.05, 0.5]))
+       contested=st.sampled_from(["refuse", "weigh"]), score_test=st.sampled_from([None, 0.05, 0.5]),
+       label_weights=st.sampled_from(["one", "reliability"]))
 def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo, consensus, every, recall, min_labels,
-                                         adjudicated, silent, contested, score_test) -> None:
+                                         adjudicated, silent, contested, score_test, label_weights) -> None:
     """Maps, provenance (every entry, in order), queues, stats and calibration buffers are equal."""
     stream, t = [], 0
     for i, (targets, pred, c, ctx, dt, labels) in enumerate(raw):
@@ -56,7 +57,7 @@ def test_engines_agree_on_random_streams(raw, name, tau_rev, strata, geo, consen
               "calibration": {"support_strata": strata, "target_size": 5, "min_refit": 1,
                               "consensus": {"method": consensus, "every": every, "growth": 0.0,
                                             "adjudicated_elements": adjudicated, "silent_weights": silent,
-                                            "score_test_level": score_test}}}
+                                            "score_test_level": score_test, "label_weights": label_weights}}}
     check_fast_matches_reference(name, stream, config, final_tick=t + 100)
 
 

@@ -101,6 +101,7 @@ def apply_fused(
     tables = op.vocabulary.outcome_tables() if op.vocabulary is not None else None
     comod = op.check_compatibility
     geo = op.observes_geometry
+    weighs_labels = op.weighs_labels
     asserted = op.vocabulary.asserted_tables() if op.observes_label else None  # type: ignore[union-attr]
     label_seen = op._label_seen_of(prov) if asserted is not None else None
     n_strata = cfg.calibration.support_strata
@@ -248,6 +249,8 @@ def apply_fused(
                     pair_slice.add_outcome(a / (a + b), y, min_refit, refit_growth)
                     if geo:  # the decisive label as one observation of y (rules.verification_increments)
                         gw = w0 * mass
+                        if weighs_labels and cons is not None:  # its reliability (consensus.label_weights)
+                            gw *= cons.verdict_reliability(pred, label, y)
                         ga, gb = (gw, 0.0) if y == 1 else (0.0, gw)
                         if timeline:
                             append(EntryRecord(node=node, predicate=pred, event_id=eid, t=t, d_alpha=ga, d_beta=gb,

@@ -52,6 +52,14 @@ class ConsensusConfig(BaseModel):
         "inside the provenance horizon weighed again after each refit (current, default; docs/method.md §8), or the "
         "one in force when it arrived (at_arrival)",
     )
+    label_weights: Literal["one", "reliability"] = Field(
+        "one",
+        description="comod with geometric_evidence verdict or label: how much of a pseudo-count a decisive label's "
+        "observation of y counts: its reliability under the channel's confusion the Dawid-Skene consensus learned "
+        "(reliability, default: a label the channel often gives to elements of the other class counts for less; "
+        "docs/method.md §8), or one whole pseudo-count (one, the default before; also before the first fit and with "
+        "method agreement_shift or none)",
+    )
     adjudicated_elements: Literal["channel", "consensus"] = Field(
         "channel",
         description="outcome of a silent claim on an element the channel labelled decisively at other times: the "

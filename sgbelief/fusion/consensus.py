@@ -48,7 +48,8 @@ from sgbelief.calibration.config import CalibrationConfig
 from sgbelief.calibration.consensus import ConsensusCalibration
 from sgbelief.calibration.dawid_skene import NONE_CLASS, DawidSkene
 
-__all__ = ["MapConsensus", "GEOMETRIC_WORKER", "SUPPORT_WORKER", "silent_claim_outcome", "support_bucket"]
+__all__ = ["MapConsensus", "GEOMETRIC_WORKER", "SUPPORT_WORKER", "label_reliability", "silent_claim_outcome",
+           "support_bucket"]
 
 #: the Dawid–Skene worker name of the geometric channel
 GEOMETRIC_WORKER = "<geometric>"
@@ -84,6 +85,33 @@ def silent_claim_outcome(posterior: np.ndarray, n_positive: np.ndarray, n_decisi
     """
     unanimous = (n_decisive > 0) & ((n_positive == 0) | (n_positive == n_decisive))
     return np.where(unanimous, n_positive / np.maximum(n_decisive, 1), posterior)
+
+
+def label_reliability(theta: np.ndarray, priors: np.ndarray) -> np.ndarray:
+    """How far a label of the channel asserts each exclusive class: r[phi, l] (docs/method.md §8).
+
+    ``theta``: the channel's confusion learned by the consensus, P(label l | z) (rows: the latent
+    classes, *none* last; columns: the labels); ``priors``: pi_z. Against phi's rivals weighed by
+    their priors, and with a uniform prior on phi itself (Eq. 2's uniform reference)::
+
+        LR(phi, l) = theta[phi, l] / (sum_{z != phi} pi_z theta[z, l] / sum_{z != phi} pi_z)
+        r(phi, l)  = LR / (1 + LR)
+
+    With ``label_weights: reliability`` a decisive label's observation of y
+    (:func:`~sgbelief.fusion.rules.verification_increments`) counts r of a pseudo-count when the
+    label asserts phi and 1 - r when it denies it. A channel that is never wrong has r near 1 for
+    its asserting labels and near 0 for its denying ones, so each observation stays about whole.
+    Returns an array (exclusive classes, labels), without the *none* row.
+    """
+    theta = np.asarray(theta, dtype=np.float64)
+    pi = np.asarray(priors, dtype=np.float64)
+    k = theta.shape[0] - 1
+    mixed = pi @ theta  # sum_z pi_z theta[z, l], per label
+    own = pi[:k, None] * theta[:k]  # pi_phi theta[phi, l]
+    rivals = np.maximum(1.0 - pi[:k], 1e-300)[:, None]  # sum_{z != phi} pi_z
+    p_rival = np.maximum(mixed[None, :] - own, 0.0) / rivals
+    lr = theta[:k] / np.maximum(p_rival, 1e-300)
+    return lr / (1.0 + lr)
 
 
 class _Codes:
@@ -143,6 +171,8 @@ class MapConsensus:
         self._row_of_code = np.zeros(0, dtype=np.intp)
         #: (posterior row, label code) of every channel label the last fit saw
         self._geo_rows = np.zeros((0, 2), dtype=np.intp)
+        #: :func:`label_reliability` of the last fit ((class code, label code); None before a fit)
+        self._label_r: np.ndarray | None = None
         self.n_at_fit = 0
         self.n_fits = 0
         #: no more refits (the operator's calibration is frozen): the last fit stays
@@ -408,7 +438,24 @@ class MapConsensus:
         ds.labels_ = ([f"{c}|b{i}" for c in self._classes.names for i in range(b)]
                       + [f"n{i}" for i in range(len(_SUPPORT_EDGES))] + ["geo:" + g for g in self._labels.names])
         self.ds_ = ds
+        self._label_r = label_reliability(ds.errors_[n_ctx + 1][:, geo_base:], ds.priors_)  # type: ignore[index]
         return ds.probas_  # type: ignore[return-value]
+
+    def verdict_reliability(self, predicate: str, label: str, outcome: int) -> float:
+        """How much of a pseudo-count a decisive label's verdict ``outcome`` on ``predicate`` counts
+        (``label_weights: reliability``): :func:`label_reliability` of the last fit, r for a label
+        that asserts the predicate and 1 - r for one that denies it; 1 before the first fit, without
+        a Dawid–Skene fit (``method: agreement_shift``) and for a class or a label the last fit
+        did not hold."""
+        table = self._label_r
+        if table is None:
+            return 1.0
+        j = self._classes.index.get(predicate, -1)
+        i = self._labels.index.get(label, -1)
+        if not (0 <= j < table.shape[0] and 0 <= i < table.shape[1]):
+            return 1.0
+        r = float(table[j, i])
+        return r if outcome == 1 else 1.0 - r
 
     def class_of(self, predicate: str) -> int:
         """The column of ``predicate`` in :meth:`fit_consensus`'s posterior (-1 if never claimed)."""

@@ -126,6 +126,12 @@ class CalibratedOperator(BaseOperator):
         return self.check_compatibility and self.config.geometric_evidence in ("verdict", "label")
 
     @property
+    def weighs_labels(self) -> bool:
+        """A decisive label's observation counts its reliability under the consensus
+        (``calibration.consensus.label_weights: reliability``; MapConsensus.verdict_reliability)."""
+        return self.observes_geometry and self.config.calibration.consensus.label_weights == "reliability"
+
+    @property
     def observes_label(self) -> bool:
         """A decisive geometric label also observes the predicates it asserts (``geometric_evidence: label``)."""
         return self.check_compatibility and self.config.geometric_evidence == "label"
@@ -272,8 +278,9 @@ class CalibratedOperator(BaseOperator):
         if y is not None:
             verified.append((y, context))
             self._pair_slice(pred).add_outcome(a / (a + b), y, cfg.calibration.min_refit, cfg.calibration.refit_growth)
-            if self.observes_geometry:
-                ga, gb = verification_increments(y, cfg.w0 * mass)
+            if self.observes_geometry:  # counts the label's reliability (consensus.label_weights)
+                r = 1.0 if consensus is None or not self.weighs_labels else consensus.verdict_reliability(pred, label, y)
+                ga, gb = verification_increments(y, cfg.w0 * mass * r)
                 prov.append(EntryRecord(node=node, predicate=pred, event_id=event.id, t=event.t, d_alpha=ga,
                                         d_beta=gb, status=EntryStatus.COMMITTED, stance=1 if y == 1 else -1,
                                         verdict=EntryVerdict.GEOMETRIC, confidence=c))
