@@ -53,7 +53,7 @@ class ConsensusConfig(BaseModel):
         "one in force when it arrived (at_arrival)",
     )
     label_weights: Literal["one", "reliability"] = Field(
-        "one",
+        "reliability",
         description="comod with geometric_evidence verdict or label: how much of a pseudo-count a decisive label's "
         "observation of y counts: its reliability under the channel's confusion the Dawid-Skene consensus learned "
         "(reliability, default: a label the channel often gives to elements of the other class counts for less; "
