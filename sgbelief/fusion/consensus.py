@@ -171,8 +171,8 @@ class MapConsensus:
         self._row_of_code = np.zeros(0, dtype=np.intp)
         #: (posterior row, label code) of every channel label the last fit saw
         self._geo_rows = np.zeros((0, 2), dtype=np.intp)
-        #: :func:`label_reliability` of the last fit ((class code, label code); None before a fit)
-        self._label_r: np.ndarray | None = None
+        #: :func:`label_reliability` of the last fit, by (predicate, label) (empty before a fit)
+        self._label_r: dict[tuple[str, Hashable], float] = {}
         self.n_at_fit = 0
         self.n_fits = 0
         #: no more refits (the operator's calibration is frozen): the last fit stays
@@ -438,7 +438,9 @@ class MapConsensus:
         ds.labels_ = ([f"{c}|b{i}" for c in self._classes.names for i in range(b)]
                       + [f"n{i}" for i in range(len(_SUPPORT_EDGES))] + ["geo:" + g for g in self._labels.names])
         self.ds_ = ds
-        self._label_r = label_reliability(ds.errors_[n_ctx + 1][:, geo_base:], ds.priors_)  # type: ignore[index]
+        r = label_reliability(ds.errors_[n_ctx + 1][:, geo_base:], ds.priors_).tolist()  # type: ignore[index]
+        labels = self._labels.names
+        self._label_r = {(pred, labels[i]): x for pred, row in zip(self._classes.names, r) for i, x in enumerate(row)}
         return ds.probas_  # type: ignore[return-value]
 
     def verdict_reliability(self, predicate: str, label: str, outcome: int) -> float:
@@ -447,14 +449,9 @@ class MapConsensus:
         that asserts the predicate and 1 - r for one that denies it; 1 before the first fit, without
         a Dawid–Skene fit (``method: agreement_shift``) and for a class or a label the last fit
         did not hold."""
-        table = self._label_r
-        if table is None:
+        r = self._label_r.get((predicate, label))  # one look-up per decisive label (docs/performance.md)
+        if r is None:
             return 1.0
-        j = self._classes.index.get(predicate, -1)
-        i = self._labels.index.get(label, -1)
-        if not (0 <= j < table.shape[0] and 0 <= i < table.shape[1]):
-            return 1.0
-        r = float(table[j, i])
         return r if outcome == 1 else 1.0 - r
 
     def class_of(self, predicate: str) -> int:
