@@ -254,6 +254,9 @@ def verification_increments(outcome: int, weight: float) -> tuple[float, float]:
     the same label is evidence about the pair, one pseudo-count in its direction::
 
         (d_alpha, d_beta) = (w T(v), 0) if outcome == 1 else (0, w T(v))
+
+    With ``calibration.consensus.label_weights: reliability`` the caller's weight also carries the
+    label's reliability, r or 1 - r (:func:`sgbelief.fusion.consensus.label_reliability`).
     """
     return (weight, 0.0) if outcome == 1 else (0.0, weight)
 
