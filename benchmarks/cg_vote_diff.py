@@ -21,7 +21,9 @@ broken at random (expected value: a tied object counts 1/k when its class is amo
 the vote with its ties broken the other way (the highest class id on main, the last seen on
 ali-dev), and of the backend; then the objects whose labels differ, by the reason the backend's
 summary gives (``unknown``, ``tie``, ``split``, ``ranking``; ``LabelReader.summary``), with how
-many of them each side labels right.
+many of them each side labels right; then, for records that carry the rooms' score readings, the
+rooms whose rank test read the scores (seed, p-value, backend minus vote) and the mean difference
+to the vote over the rooms counted.
 """
 
 from __future__ import annotations
@@ -91,6 +93,9 @@ def run(args: argparse.Namespace) -> None:
             objects = captured["objects"]
             rec["acc"], rec["labels"] = r.accuracy, r.labels
             rec["truth"] = [world.objects[t][0] if t >= 0 else None for t in r.truth]
+            # how the room read its scores: the rank test's p-value and whether the scores are read
+            rec["readings"] = {ctx: {"p": r.p_value, "reads_scores": r.reads_scores, "claims": r.claims}
+                               for ctx, r in backend.operator.score_readings(backend.graph).items()}
             rec["why"] = {d["node"]: d["why"] for d in r.summary.differing}
             rec["vote_labels"] = [vote([world.classes[int(c)] for c in o["class_id"]], branch, world.classes)
                                   for o in objects]
@@ -172,6 +177,17 @@ def summarise(paths: list[str]) -> None:
             if c:
                 print(f"  differ, {reason:<8} {c['objects']:4d} objects: vote right {c['vote right']}, "
                       f"comod right {c['comod right']}")
+        read = [k for k, r in enumerate(recs) if any(v["reads_scores"] for v in r.get("readings", {}).values())]
+        if any("readings" in r for r in recs):
+            print(f"  scores read in {len(read)} of {len(recs)} rooms" + (
+                " (seed, rank test p, comod - vote: " + ", ".join(
+                    f"{recs[k]['seed']} {min(v['p'] for v in recs[k]['readings'].values()):.3f} "
+                    f"{acc['comod'][k] - acc['vote'][k]:+.3f}" for k in read) + ")" if read else ""))
+            counted = [k for k in range(len(recs)) if k not in read]
+            if counted:
+                gap = sum(acc["comod"][k] - acc["vote"][k] for k in counted) / len(counted)
+                fair = sum(acc["comod"][k] - acc["vote, ties at random"][k] for k in counted) / len(counted)
+                print(f"  counted rooms: comod - vote {gap:+.3f}, comod - vote with ties at random {fair:+.3f}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -108,3 +108,30 @@ def test_vote_diff_summary_counts_ties_and_reasons(tmp_path: Path, capsys) -> No
             words = line.replace(",", " ").split()  # differ REASON N objects: vote right V comod right C
             rows[words[1]] = (int(words[2]), int(words[6]), int(words[9]))
     assert rows == {"tie": (1, 0, 1), "split": (1, 0, 1), "ranking": (1, 1, 0), "unknown": (1, 1, 0)}
+
+
+def test_vote_diff_summary_names_the_rooms_that_read_their_scores(tmp_path: Path, capsys) -> None:
+    """cg_vote_diff.py --summarise: the rooms whose rank test read the scores, with their p-value
+    and gap to the vote, and the mean gap over the rooms counted."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        import cg_vote_diff as D
+    finally:
+        sys.path.remove(str(BENCH))
+    classes = ["chair", "stool"]
+    objects = [{"class_ids": ["chair", "chair"], "routed": {"chair": 2}, "node": "a"},
+               {"class_ids": ["stool", "chair"], "routed": {"stool": 1, "chair": 1}, "node": "b"}]  # a tie
+
+    def room(seed: int, labels: list[str], p: float, read: bool) -> dict:
+        return {"seed": seed, "branch": "main", "confidences": "low", "channel": "none", "classes": classes,
+                "truth": ["chair", "chair"], "labels": labels, "acc": sum(x == "chair" for x in labels) / 2,
+                "objects": objects, "readings": {"det": {"p": p, "reads_scores": read, "claims": 4}}}
+
+    path = tmp_path / "runs.jsonl"
+    path.write_text("\n".join(json.dumps(r) for r in (room(0, ["chair", "chair"], 0.40, False),
+                                                       room(1, ["chair", "stool"], 0.02, True))) + "\n")
+    D.summarise([str(path)])
+    out = capsys.readouterr().out
+    assert "scores read in 1 of 2 rooms (seed, rank test p, comod - vote: 1 0.020 -0.500)" in out
+    # the counted room equals the vote (1.0), and the vote with its tie at random is 0.75
+    assert "counted rooms: comod - vote +0.000, comod - vote with ties at random +0.250" in out
