@@ -202,9 +202,9 @@ def _channel(det: dict, node: Any, t: int) -> str | None:
 
 
 def _run(generation: str, interleaved: bool, frames: list, n_start: int, fresh: bool, channel: bool,
-         uid: bool) -> tuple:
+         uid: bool, targeting: str = "merge") -> tuple:
     backend = ConceptGraphsBackend("comod", context="t", class_names=CLASSES, print_summary=False,
-                                   channel=_channel if channel else None)
+                                   channel=_channel if channel else None, targeting=targeting)
     if interleaved:
         _track_queued_dicts(backend)
     log: list = []
@@ -259,12 +259,12 @@ def _run(generation: str, interleaved: bool, frames: list, n_start: int, fresh: 
 
 @settings(max_examples=120, deadline=None)
 @given(frames=frames_st, n_start=st.integers(0, 4), fresh=st.booleans(), channel=st.booleans(), uid=st.booleans(),
-       generation=st.sampled_from(["main", "ali-dev"]))
+       generation=st.sampled_from(["main", "ali-dev"]), targeting=st.sampled_from(["merge", "spread"]))
 def test_routing_the_frame_before_its_merges_equals_routing_each_detection_before_its_merge(
-        frames: list, n_start: int, fresh: bool, channel: bool, uid: bool, generation: str) -> None:
+        frames: list, n_start: int, fresh: bool, channel: bool, uid: bool, generation: str, targeting: str) -> None:
     uid = uid or generation == "ali-dev"  # ali-dev's detections carry a uuid
-    plain = _run(generation, True, frames, n_start, fresh, channel, uid)
-    deferred = _run(generation, False, frames, n_start, fresh, channel, uid)
+    plain = _run(generation, True, frames, n_start, fresh, channel, uid, targeting)
+    deferred = _run(generation, False, frames, n_start, fresh, channel, uid, targeting)
     assert deferred[0] == plain[0]  # graph: beliefs, provenance, node attributes
     assert deferred[1:] == plain[1:]  # labels, map objects, ConceptGraphs' calls in order
 

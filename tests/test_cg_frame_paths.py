@@ -99,7 +99,7 @@ def test_targets_with_scored_candidates_equal_targets_from_the_row(data: st.Data
     threshold = data.draw(st.sampled_from([float("-inf"), 0.5]))
     out = []
     for scored in (False, True):
-        backend = _backend()
+        backend = _backend(targeting="spread")  # the candidates are read only when claims spread
         objects = [_det(k, uid=uid) for k in range(n)]
         touched: set[int] = set()
         cands = candidate_matrix(row[None, :], threshold)[0] if scored else None

@@ -263,8 +263,32 @@ def test_same_return_contract_as_original_on_stand_ins():
     assert backend.graph.evidence_count() == sum(o["num_detections"] for o in ours)
 
 
+def _two_candidates(targeting: str):
+    """One detection whose association row has two candidates above the threshold (1.5, 0.5)."""
+    backend = ConceptGraphsBackend("majority", targeting=targeting)
+    f = backend.functions("ali-dev")
+    a = make_detection(blob((0, 0, 0)), 0, "chair", 0.9, 0, generation="ali-dev", seed=1)
+    b = make_detection(blob((0.1, 0, 0)), 0, "chair", 0.9, 0, mask_idx=1, generation="ali-dev", seed=2)
+    objects = MapObjectList([a, b])
+    det = make_detection(blob((0.05, 0, 0)), 0, "chair", 0.9, 1, generation="ali-dev", seed=3)
+    idx = f.match_detections_to_objects(torch.tensor([[1.5, 0.5]]), 0.2)
+    backend.keep_reports = True
+    objects = f.merge_obj_matches(DetectionList([det]), objects, idx, 0.05, False, 0.1, 10, "iou", "cpu")
+    return backend, a, b, objects
+
+
+def test_a_detections_claims_go_whole_to_the_object_it_merges_into_by_default():
+    backend, a, b, objects = _two_candidates("merge")
+    targets = [dict((o.node, o.mass) for o in r.targets) for r in backend.reports]
+    # a's and b's own detections, and the new one whole to a (the argmax, which its geometry joins)
+    assert sorted(targets, key=str) == sorted([{str(a["id"]): 1.0}, {str(a["id"]): 1.0}, {str(b["id"]): 1.0}], key=str)
+    assert objects[0]["num_detections"] == 2 and objects[1]["num_detections"] == 1
+    with pytest.raises(ValueError, match="targeting"):
+        ConceptGraphsBackend("majority", targeting="argmax")
+
+
 def test_spread_targeting_over_objects_above_threshold():
-    backend = ConceptGraphsBackend("majority")
+    backend = ConceptGraphsBackend("majority", targeting="spread")
     f = backend.functions("ali-dev")
     a = make_detection(blob((0, 0, 0)), 0, "chair", 0.9, 0, generation="ali-dev", seed=1)
     b = make_detection(blob((0.1, 0, 0)), 0, "chair", 0.9, 0, mask_idx=1, generation="ali-dev", seed=2)

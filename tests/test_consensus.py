@@ -428,3 +428,54 @@ def test_the_batched_likelihood_ratios_equal_the_scalar_ones(data, cold, target)
         lam, kappa = cal.likelihood_ratio(float(qc[i]), tuple(int(k[i]) for k in keys))
         assert math.isclose(lams[i], lam, rel_tol=1e-12), (i, lams[i], lam)
         assert math.isclose(kappas[i], kappa, rel_tol=1e-12, abs_tol=1e-15), (i, kappas[i], kappa)
+
+
+def test_merged_elements_count_toward_the_next_refit() -> None:
+    """MapConsensus.due: claims whose element was merged into another count as new claims do
+    (they agree or disagree with other claims now); a refit resets the count."""
+    from sgbelief.calibration.config import CalibrationConfig
+
+    cfg = CalibrationConfig.model_validate({"consensus": {"method": "agreement_shift", "every": 4, "growth": 0.0}})
+    mc = MapConsensus(cfg, frozenset({"is_a", "is_b"}))
+    for i in range(4):
+        mc.add_claim(f"v{i}", "is_a", "det", 0.6, "cell", False, f"e{i}", t=i)
+    assert mc.due()
+    mc.refit()
+    assert not mc.due() and mc.moved_since_fit == 0
+    mc.add_claim("v0", "is_b", "det", 0.6, "cell", False, "e4", t=4)  # one new claim: 1 of 4
+    mc.merge_elements("v0", "v1")  # v1's one claim moves: 2 of 4
+    assert mc.moved_since_fit == 1 and not mc.due()
+    mc.merge_elements("v0", "v2")
+    mc.merge_elements("v0", "v0")  # a merge into itself moves nothing
+    assert not mc.due()
+    mc.merge_elements("v3", "v0")  # v0 now holds 4 claims (its own 2, v1's, v2's): 7 of 4
+    assert mc.moved_since_fit == 6 and mc.due()
+    mc.refit()
+    assert not mc.due() and mc.moved_since_fit == 0
+    mc.frozen = True
+    mc.merge_elements("v9", "v3")
+    assert not mc.due()
+
+
+def test_refit_consensus_refits_after_merges_with_no_new_claim() -> None:
+    """CalibratedOperator.refit_consensus: a merge after the last claim (ConceptGraphs' end-of-run
+    merge) makes the consensus refit once, outside an update; nothing happens before a consensus
+    exists or when nothing changed since the last fit."""
+    cfg = {"calibration": {"consensus": {"method": "agreement_shift", "every": 4, "growth": 0.0}}}
+    from sgbelief.fusion.open_vocab import derive_table
+
+    op = make_operator("comod", config=cfg, vocabulary=derive_table(["a", "b"]))
+    g = SceneGraph(create_nodes=True)
+    assert op.refit_consensus(g) == []
+    for i, (node, cls) in enumerate([("v0", "a"), ("v1", "a"), ("v2", "b"), ("v3", "a")]):
+        op.update(g, EvidenceEvent({node: 1.0}, f"is_{cls}", 0.7, "det", t=i, id=f"e{i}"))
+    cons = op._consensus_of(g.provenance)
+    assert cons.n_fits == 0 and cons.changed_since_fit()
+    op.refit_consensus(g)  # the four claims
+    assert cons.n_fits == 1 and not cons.changed_since_fit()
+    assert op.refit_consensus(g) == [] and cons.n_fits == 1  # nothing changed since
+    op.merge_nodes(g, "v0", "v1")
+    assert cons.changed_since_fit() and not cons.due()  # one moved claim: not due, but changed
+    op.refit_consensus(g)
+    assert cons.n_fits == 2 and not cons.changed_since_fit()
+    assert op.score_readings(g)["det"].claims == 2  # v0 now holds two claims: they enter the fit

@@ -174,6 +174,9 @@ class MapConsensus:
         #: :func:`label_reliability` of the last fit, by (predicate, label) (empty before a fit)
         self._label_r: dict[tuple[str, Hashable], float] = {}
         self.n_at_fit = 0
+        #: claims whose element was merged into another since the last fit (they agree or
+        #: disagree with other claims now): they count toward the next refit as new claims do
+        self.moved_since_fit = 0
         self.n_fits = 0
         #: no more refits (the operator's calibration is frozen): the last fit stays
         self.frozen = False
@@ -258,6 +261,7 @@ class MapConsensus:
         self._tasks.index[absorb] = k  # a late claim under the absorbed id counts for keep
         moved = self.counts.pop(absorb, None)
         if moved:
+            self.moved_since_fit += sum(moved.values())
             held = self.counts.setdefault(keep, {})
             for p, n in moved.items():
                 held[p] = held.get(p, 0) + n
@@ -312,11 +316,16 @@ class MapConsensus:
 
     # ------------------------------------------------------------------ batches
     def due(self) -> bool:
-        """Whether enough claims arrived since the last refit: max(every, growth * held) new ones."""
+        """Whether enough changed since the last refit: max(every, growth * held) claims that are
+        new or whose element was merged into another (:meth:`merge_elements`)."""
         if self.frozen:
             return False
         n = len(self.event)
-        return n - self.n_at_fit >= max(self.every, self.growth * self.n_at_fit)
+        return n - self.n_at_fit + self.moved_since_fit >= max(self.every, self.growth * self.n_at_fit)
+
+    def changed_since_fit(self) -> bool:
+        """Whether any claim arrived or any element was merged since the last refit."""
+        return not self.frozen and (len(self.event) > self.n_at_fit or self.moved_since_fit > 0)
 
     def likelihood_ratio(self, confidence: float, cell: Hashable, predicate: str,
                          context: str) -> tuple[float, float] | None:
@@ -342,6 +351,7 @@ class MapConsensus:
         """Refit the Dawid–Skene model and the per-cell calibration on the whole table."""
         n = len(self.event)
         self.n_at_fit = n
+        self.moved_since_fit = 0
         self.n_fits += 1
         if n == 0:
             return

@@ -93,6 +93,11 @@ class ConceptGraphsBackend(MapBeliefs):
             name detected most often, ties to the first seen), ``"first"`` (the first name detected), or a
             mapping predicate -> class name (e.g. ``{"is_table_or_desk": "table"}``; predicates not in
             it fall back to most frequent). A mapped name that is a known class id keeps that id.
+        targeting: where a matched detection's claims go. ``"merge"`` (default): whole to the object
+            ConceptGraphs merges the detection's geometry into (its association argmax), so each
+            object's beliefs are about the detections it is made of. ``"spread"``: over every
+            candidate above the threshold, T(v) proportional to its positive association score
+            (docs/conceptgraphs.md, "Evidence routing").
     """
 
     def __init__(
@@ -120,6 +125,7 @@ class ConceptGraphsBackend(MapBeliefs):
         merge: bool | Iterable[str] = False,
         ignore: Iterable[str] = BACKGROUND,
         print_summary: bool | TextIO = True,
+        targeting: str = "merge",
     ) -> None:
         from sgbelief.api.scene_graph import SceneGraph
 
@@ -159,7 +165,8 @@ class ConceptGraphsBackend(MapBeliefs):
             op, vocab, graph if graph is not None else SceneGraph(), seed_from_graph=graph is not None,
             context=context, channel=channel, label_key=label_key, unknown_label=unknown_label,
             unknown_class_id=unknown_class_id, tau=tau, tau_t=tau_t, on_filter=on_filter,
-            confidence_map=confidence_map, class_names=class_names, label_rule=label_rule, abstain=abstain)
+            confidence_map=confidence_map, class_names=class_names, label_rule=label_rule, abstain=abstain,
+            targeting=targeting)
         self._share_table = isinstance(operator, str) or getattr(op, "vocabulary", None) is None
         self._patcher: Patcher | None = None
         self.gc_checkpoints = bool(gc_checkpoints)

@@ -132,7 +132,8 @@ class AliDevGeneration(GenerationFunctions):
         n_before = len(objects)
         touched = self.frame_start(objects)
         # the targeting candidates of every row at once (see MapBeliefs.targets_for)
-        cands = candidate_matrix(sims[:, :n_before], thr) if sims is not None and sims.ndim == 2 else None
+        cands = candidate_matrix(sims[:, :n_before], thr) if (
+            backend.targeting == "spread" and sims is not None and sims.ndim == 2) else None
         tracker = self.helper("tracker")
         count_before = getattr(tracker, "curr_object_count", 0) if tracker is not None else 0
         rows: list[tuple[int | None, dict]] = []  # (match, detection), in row order

@@ -228,7 +228,7 @@ class GenerationFunctions:
         if scores.shape[1]:
             best_of, max_of = scores.argmax(axis=1).tolist(), scores.max(axis=1).tolist()
             n = min(scores.shape[1], len(objects))  # candidates of every row at once (see targets_for)
-            cands = candidate_matrix(scores[:, :n], threshold)
+            cands = candidate_matrix(scores[:, :n], threshold) if backend.targeting == "spread" else None
         else:
             best_of, max_of, cands = [0] * n_rows, [NEG_INF] * n_rows, None
         merges: list[tuple[int | None, dict]] = []  # (position, detection), in row order
@@ -302,6 +302,9 @@ class GenerationFunctions:
         for obj, keep in zip(before, kept):
             if not keep:
                 backend.identity.retire(backend.identity.lookup(obj) or "")
+        # the pass is ConceptGraphs' map-wide step (periodic, and at the end of the run): the
+        # consensus is refitted on the objects as merged, which the labels are read from
+        backend.refit_consensus()
         self.sync_labels(new)
         return new, index_updates
 

@@ -30,6 +30,7 @@ from sgbelief.adapters.conceptgraphs.summary import (
 )
 from sgbelief.adapters.conceptgraphs.vocab import ClassVocabulary
 from sgbelief.errors import LowConfidenceWarning, warn_at_caller
+from sgbelief.fusion.operators.calibrated import CalibratedOperator
 
 __all__ = ["DEFAULT_LABEL_KEY", "BackendSummary", "Claim", "DetectionLabelFn", "MapBeliefs"]
 
@@ -67,6 +68,8 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
             often on this object, ties to the first seen), ``"first"`` (the first name detected), or a
             mapping predicate -> class name (e.g. ``{"is_table_or_desk": "table"}``; predicates not in
             it fall back to most frequent). A mapped name that is a known class id keeps that id.
+        targeting: ``"merge"`` (default) or ``"spread"``, where a matched detection's claims go
+            (:meth:`targets_for`).
     """
 
     def __init__(
@@ -88,6 +91,7 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
         class_names: Sequence[str] | None = None,
         label_rule: str | Mapping[str, str] = "most_frequent",
         abstain: bool = True,
+        targeting: str = "merge",
     ) -> None:
         from sgbelief.fusion.channel import NullChannel
         from sgbelief.fusion.operators.base import BaseOperator
@@ -123,6 +127,11 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
         self.unknown_label = unknown_label
         self.unknown_class_id = unknown_class_id
         self.abstain = bool(abstain)
+        if targeting not in ("merge", "spread"):
+            raise ValueError(f"targeting must be 'merge' or 'spread', not {targeting!r}")
+        #: "merge": a detection's claims go whole to the object its geometry merges into; "spread":
+        #: over the candidates by association score (targets_for)
+        self.targeting = targeting
         if on_filter not in ("mark", "remove"):
             raise ValueError("on_filter must be 'mark' or 'remove'")
         self.on_filter = on_filter
@@ -401,6 +410,16 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
         for res in resolutions:
             changed.add(res.node)
 
+    def refit_consensus(self) -> None:
+        """After ConceptGraphs' overlap-merge pass: refit the operator's map consensus on the
+        merged objects (:meth:`CalibratedOperator.refit_consensus`; its O(claims) rides on the
+        pass's own O(objects^2) overlap matrix); the nodes whose claims it reweighed are
+        relabelled with the pass's other changes."""
+        op = self.operator
+        if isinstance(op, CalibratedOperator):
+            self.flush()
+            self._note_resolutions(op.refit_consensus(self.graph))
+
     def take_changed_nodes(self) -> set[Any]:
         """Nodes whose beliefs may have changed since the previous call (then forgotten): targets of
         routed events, nodes that absorbed a merge, nodes of queue resolutions. The per-frame merges
@@ -414,13 +433,20 @@ class MapBeliefs(NewObjectRegistration, LabelReader):
                     candidates: Sequence[int] | Mapping[int, float] | None = None) -> dict[Any, float]:
         """Targeting distribution T for one detection from its row of association scores.
 
-        Every object whose score is above ``threshold`` (finite scores when it is -inf) is a
-        candidate; T(v) is proportional to max(score, 0) over the candidates, and the argmax
-        alone gets mass 1 when no candidate has a positive score.  The caller drops T(v) <= tau_T.
+        Under ``targeting="merge"`` the object ConceptGraphs merges the detection into, ``best``
+        (the row's argmax), gets T = 1: the claim describes the pixels that become part of that
+        object. Under ``"spread"`` every object whose score is above ``threshold`` (finite scores
+        when it is -inf) is a candidate; T(v) is proportional to max(score, 0) over the
+        candidates, and the argmax alone gets mass 1 when no candidate has a positive score.  The
+        caller drops T(v) <= tau_T.
         ``touched``: the list positions of the targeted objects are added to it. ``candidates``:
         the positive candidates when the caller found them for the whole frame, as positions or as
         position -> score (:func:`~.generation_base.candidate_matrix`; then ``row`` is not read).
         """
+        if self.targeting == "merge":
+            if touched is not None:
+                touched.add(best)
+            return {self.frame_node(objects[best]): 1.0}
         if isinstance(candidates, dict):
             pos: Mapping[int, float] = candidates
         else:

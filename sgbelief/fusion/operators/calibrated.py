@@ -514,6 +514,17 @@ class CalibratedOperator(BaseOperator):
             return {}
         return held[1].score_readings()
 
+    def refit_consensus(self, graph: SceneGraphModel) -> list[QueueResolution]:
+        """Refit the map's consensus now, outside an update, if any claim arrived or any element
+        was merged since its last fit. For a mapper's own map-wide passes, whose cost already grows
+        with the map: ConceptGraphs' periodic and end-of-run merges change which claims share an
+        object after the last claim has arrived, and its labels are read after them. Returns the
+        resolutions of the claims it reweighed."""
+        held = self._consensus.get(id(graph.provenance))
+        if held is None or held[0] is not graph.provenance or not held[1].changed_since_fit():
+            return []
+        return self._refit_consensus(graph.provenance, held[1], graph.clock)
+
     def freeze_calibration(self) -> None:
         """Stop learning from new outcomes (e.g. to replay with a fixed calibration)."""
         self.calibrator_.refit_all()
