@@ -212,8 +212,9 @@ class GenerationFunctions:
 
     # ---------------------------------------------------------------- shared loops
     def assign(self, detection_list: Any, objects: Any, agg_sim: Any, threshold: float, merge_one: MergeOne) -> Any:
-        """Association loop: a new object when the row has no candidate, else spread the beliefs
-        over the candidates and merge the geometry into the argmax (every row routed first, then
+        """Association loop: a new object when the row has no candidate, else route the claims
+        (``targeting``: whole to the argmax, or spread over the candidates) and merge the geometry
+        into the argmax (every row routed first, then
         the merges in row order: :meth:`merge_pass`)."""
         backend = self.backend
         # the frame's events in one update_many call; each object resolved to its node once

@@ -40,7 +40,8 @@ class MainGeneration(GenerationFunctions):
         return out
 
     def merge_detections_to_objects(self, cfg: Any, detection_list: Any, objects: Any, agg_sim: Any) -> Any:
-        """Rows of -inf add a new object; otherwise merge into the argmax, beliefs spread over candidates."""
+        """Rows of -inf add a new object; otherwise merge into the argmax, the claims routed by
+        ``targeting`` (whole to the argmax, or spread over the candidates)."""
         return self.assign(detection_list, objects, agg_sim, NEG_INF,
                            lambda o, d: self.geo_merge(cfg, o, d, False))
 
